@@ -1,0 +1,5 @@
+import sys
+
+from fxflex.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""fxflex.bench"""

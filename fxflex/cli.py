@@ -1,0 +1,284 @@
+"""The ``fxflex`` command line (SPEC section 8).
+
+Every command takes ``--scene FILE.toml``, ``--set KEY=VALUE`` (repeatable) and ``--json``.
+With ``--json`` stdout carries one JSON object and nothing else; progress and logs go to stderr.
+Bad input ends with one line on stderr naming what is wrong and what is allowed, exit status 2,
+and nothing written. Under MPI every rank runs the command; only rank 0 prints and writes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import os
+import sys
+import time
+
+from fxflex import __version__
+from fxflex.errors import FxflexError
+from fxflex.scene import METHODS, load_scene
+
+__all__ = ["main"]
+
+log = logging.getLogger("fxflex")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse whose errors are one line: ``fxflex: error: <what> ; allowed: ...``."""
+
+    def error(self, message):
+        raise FxflexError(message)
+
+
+def _positive(name):
+    def check(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name}: expected a number, got {text!r}") from None
+        if not (value > 0 and math.isfinite(value)):
+            raise argparse.ArgumentTypeError(f"{name}: must be > 0, got {text!r}")
+        return value
+    return check
+
+
+def _number(name):
+    def check(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name}: expected a number, got {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{name}: expected a finite number, got {text!r}")
+        return value
+    return check
+
+
+def _method(text):
+    if text not in METHODS:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a method; allowed: {' '.join(METHODS)}")
+    return text
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("scene")
+    g.add_argument("--scene", metavar="FILE.toml", help="scene file (SPEC section 8)")
+    g.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], dest="overrides",
+                   help="override a scene key, e.g. --set geometry.twist_deg=0 (repeatable)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
+
+def _physics(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--rpm", type=_number("--rpm"), help="hub speed (rev/min); sets rotation.rpm")
+    p.add_argument("--damping", type=_number("--damping"), metavar="C",
+                   help="damping coefficient c (kg s^-1 m^-3); sets damping.c")
+    p.add_argument("--damping-model", choices=("relative", "absolute"),
+                   help="sets damping.model (SPEC section 5)")
+
+
+def make_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="fxflex", description=__doc__.split("\n\n")[0],
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"fxflex {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    p = sub.add_parser("info", help="the resolved scene and each method's DOF count")
+    p.add_argument("--method", type=_method, help="only this method")
+    _common(p)
+
+    p = sub.add_parser("steady", help="rotating-frame equilibrium at constant speed")
+    p.add_argument("--method", type=_method, required=True, help=" | ".join(METHODS))
+    _physics(p)
+    _common(p)
+
+    p = sub.add_parser("run", help="transient simulation; tip deflection history")
+    p.add_argument("--method", type=_method, required=True, help=" | ".join(METHODS))
+    _physics(p)
+    p.add_argument("--t-end", type=_positive("--t-end"), default=0.01, metavar="T",
+                   help="end time (s), default 0.01")
+    p.add_argument("--dt", type=_positive("--dt"), metavar="DT",
+                   help="time step (s); default: the paper's step for the method/integrator")
+    p.add_argument("--integrator", choices=("ab2", "cd", "generalized-alpha"),
+                   help="default: the paper's (ab2 for ffrf gcms lebb nebb, cd for tlf ancf)")
+    p.add_argument("--rho-inf", type=_number("--rho-inf"), default=0.9, metavar="X",
+                   help="generalized-alpha spectral radius at infinity, default 0.9")
+    p.add_argument("--force-eval", choices=("ufl", "invariant", "element"),
+                   help="internal force route: tlf ufl|invariant, nebb/ancf invariant|element")
+    p.add_argument("--mass", choices=("consistent", "lumped"), help="tlf mass matrix")
+    p.add_argument("--out", metavar="FILE.csv", help="write the time series as it goes")
+    p.add_argument("--sample-dt", type=_positive("--sample-dt"), metavar="DT",
+                   help="output interval (s); default max(dt, t_end/20000)")
+    _common(p)
+    return parser
+
+
+def _scene_from_args(args):
+    overrides = list(args.overrides)
+    for flag, key in (("rpm", "rotation.rpm"), ("damping", "damping.c"),
+                      ("damping_model", "damping.model")):
+        value = getattr(args, flag, None)
+        if value is not None:
+            overrides.append(f"{key}={json.dumps(value)}")
+    return load_scene(args.scene, overrides)
+
+
+def _emit(comm, args, payload: dict, text: str) -> None:
+    if comm.rank != 0:
+        return
+    if args.json:
+        sys.stdout.write(json.dumps(payload) + "\n")
+    else:
+        sys.stdout.write(text.rstrip("\n") + "\n")
+    sys.stdout.flush()
+
+
+def _fmt_tip(tip_mm: dict) -> str:
+    return "  ".join(f"{k} {v:+.6f} mm" if v is not None else f"{k} nan"
+                     for k, v in tip_mm.items())
+
+
+def cmd_info(args, comm) -> None:
+    from fxflex.formulation import dof_count, method_info
+    from fxflex.io import envelope
+
+    scene = _scene_from_args(args)
+    methods = [args.method] if args.method else list(METHODS)
+    dofs = {m: dof_count(m, scene) for m in methods}
+    payload = envelope(scene, methods={m: {"description": method_info()[m], "dof": dofs[m]}
+                                       for m in methods})
+    lines = [f"fxflex {__version__}   scene {scene.hash}"]
+    for sec, table in scene.to_dict().items():
+        lines.append(f"[{sec}]")
+        lines += [f"  {k} = {json.dumps(v)}" for k, v in table.items()]
+    lines.append("methods:")
+    for m in methods:
+        d = dofs[m]
+        lines.append(f"  {m:5s} dof {d if d is not None else 'n/a':>7}   {method_info()[m]}")
+    _emit(comm, args, payload, "\n".join(lines))
+
+
+def cmd_steady(args, comm) -> None:
+    from fxflex.formulation import build
+    from fxflex.io import envelope, tip_mm
+
+    scene = _scene_from_args(args)
+    if scene.rotation.profile != "constant":
+        log.warning("steady: rotation.profile = %r; solving at the final speed %g rpm",
+                    scene.rotation.profile, scene.rotation.rpm)
+    t0 = time.perf_counter()
+    form = build(args.method, scene, comm)
+    t1 = time.perf_counter()
+    st = form.steady_state()
+    t2 = time.perf_counter()
+    stable = getattr(form, "stable", None)
+    verdict = stable(st) if callable(stable) else None
+    timings = {"preprocess": t1 - t0, "solve": t2 - t1}
+    payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
+                       tip_mm=tip_mm(st.tip), stable=verdict, converged=st.converged,
+                       iterations=st.iterations, timings_s=timings,
+                       detail_timings_s={**form.timings, **st.timings}, **st.extra)
+    text = (f"{args.method} steady state at {scene.rotation.rpm:g} rpm  (dof {form.dof}, "
+            f"{st.iterations} iterations, {'converged' if st.converged else 'NOT converged'})\n"
+            f"  tip: {_fmt_tip(tip_mm(st.tip))}\n"
+            f"  stable: {verdict}   preprocess {timings['preprocess']:.2f} s, "
+            f"solve {timings['solve']:.2f} s")
+    _emit(comm, args, payload, text)
+    if not st.converged:
+        raise SystemExit(1)
+
+
+def cmd_run(args, comm) -> None:
+    from fxflex.formulation import BuildOptions, build, check_options, default_integration
+    from fxflex.io import Progress, SeriesWriter, envelope, tip_mm
+    from fxflex.time import diagnose, simulate
+
+    scene = _scene_from_args(args)
+    options = BuildOptions(force_eval=args.force_eval, mass=args.mass, need_steady=False)
+    check_options(args.method, options)
+    integrator, dt = default_integration(args.method, args.integrator, args.dt)
+    if args.out:
+        folder = os.path.dirname(os.path.abspath(args.out))
+        if not os.path.isdir(folder):
+            raise FxflexError(f"--out: directory does not exist: {folder}")
+    t0 = time.perf_counter()
+    form = build(args.method, scene, comm, options)
+    t_pre = time.perf_counter() - t0
+    nsteps = max(int(round(args.t_end / dt)), 1)
+    sample_dt = args.sample_dt or max(dt, args.t_end / 20000)
+    sample_every = max(1, int(round(sample_dt / dt)))
+    extra_cols = list(getattr(form, "extra_columns", []))
+    columns = ["t_s", "longitudinal_m", "orthogonal_m", "load_m"] + extra_cols
+    meta = envelope(scene, method=args.method, integrator=integrator, dt_s=dt,
+                    t_end_s=args.t_end, dof=form.dof, force_eval=getattr(form, "force_eval", None),
+                    mass=getattr(form, "mass_kind", None))
+    writer = SeriesWriter(args.out, meta, columns, enabled=bool(args.out) and comm.rank == 0) \
+        if args.out else None
+    progress = Progress(nsteps, f"{args.method} {integrator} dt={dt:.3g}",
+                        enabled=comm.rank == 0)
+
+    def on_sample(t, tip, extras):
+        if writer is not None:
+            writer.write((t, *tip, *extras))
+
+    try:
+        res = simulate(form, integrator, dt, args.t_end, sample_every=sample_every,
+                       on_sample=on_sample, progress=progress)
+    finally:
+        if writer is not None:
+            writer.close()
+    progress.close(f"{res.steps} steps")
+    diverged = diagnose(form, integrator, dt, res) if res.diverged else None
+    payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
+                       integrator=integrator, dt_s=dt, t_end_s=args.t_end, t_s=res.t,
+                       steps=res.steps, tip_mm=tip_mm(res.tip), stable=None,
+                       diverged=diverged, series=os.path.abspath(args.out) if args.out else None,
+                       timings_s={"preprocess": t_pre, "solve": res.wall_s},
+                       detail_timings_s=form.timings)
+    text = (f"{args.method} {integrator} dt={dt:.3g} s, {res.steps} steps to t={res.t:.6g} s "
+            f"(dof {form.dof})\n  tip: {_fmt_tip(tip_mm(res.tip))}\n"
+            f"  preprocess {t_pre:.2f} s, solve {res.wall_s:.2f} s"
+            + (f" ({1e6 * res.wall_s / res.steps:.1f} us/step)" if res.steps else ""))
+    if diverged:
+        text += (f"\n  DIVERGED at t={diverged['time_s']:.6g} s: {diverged['cause']} -- "
+                 f"{diverged['detail']}")
+    if args.out:
+        text += f"\n  series: {args.out}"
+    _emit(comm, args, payload, text)
+
+
+COMMANDS = {"info": cmd_info, "steady": cmd_steady, "run": cmd_run}
+
+
+def _quiet_logs() -> None:
+    logging.basicConfig(level=logging.WARNING, stream=sys.stderr,
+                        format="fxflex: %(levelname)s: %(message)s")
+    for name in ("ffcx", "UFL", "ufl", "dolfinx", "FFCX"):
+        logging.getLogger(name).setLevel(logging.WARNING)
+
+
+def main(argv: list[str] | None = None) -> int:
+    _quiet_logs()
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    try:
+        args = make_parser().parse_args(argv)
+        COMMANDS[args.command](args, comm)
+    except FxflexError as exc:
+        if comm.rank == 0:
+            sys.stderr.write(f"fxflex: error: {exc}\n")
+        return 2
+    except SystemExit as exc:       # --help, --version, or a command's own status
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    except KeyboardInterrupt:
+        if comm.rank == 0:
+            sys.stderr.write("\nfxflex: interrupted\n")
+        return 130
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,146 @@
+"""The scene: frozen dataclasses mirroring the TOML schema of SPEC section 8.
+
+Defaults are the paper's Sect. 4 example (SPEC section 1). Validation lives in
+:mod:`fxflex.scene.load`; these classes only hold values and derived quantities.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+
+__all__ = [
+    "Geometry", "Material", "Section", "Load", "Rotation", "Damping", "MeshSpec", "Reduction",
+    "Scene", "PAPER_RPM", "PAPER_DAMPING", "METHODS",
+]
+
+METHODS = ("ffrf", "gcms", "tlf", "lebb", "nebb", "ancf")
+PAPER_RPM = (1000.0, 5000.0, 10000.0)
+PAPER_DAMPING = (100.0, 500.0, 1000.0)
+
+
+@dataclass(frozen=True)
+class Geometry:
+    length: float = 1.0
+    root_y: float = 0.12
+    root_z: float = 0.06
+    tip_y: float = 0.08
+    tip_z: float = 0.04
+    twist_deg: float = -45.0
+    hub_radius: float = 0.0
+
+    def size_y(self, s):
+        """Section size along Y~ at normalised position s = X~/L in [0, 1] (linear taper)."""
+        return self.root_y + (self.tip_y - self.root_y) * s
+
+    def size_z(self, s):
+        return self.root_z + (self.tip_z - self.root_z) * s
+
+    def twist(self, s):
+        """Section rotation about +X (rad) at s = X~/L, linear in X (right-hand rule)."""
+        return math.radians(self.twist_deg) * s
+
+
+@dataclass(frozen=True)
+class Material:
+    E: float = 210e9
+    nu: float = 0.28
+    rho: float = 7850.0
+
+    @property
+    def G(self) -> float:
+        return self.E / (2.0 * (1.0 + self.nu))
+
+    @property
+    def lame(self) -> tuple[float, float]:
+        """(lambda, mu) of the St.Venant-Kirchhoff / Hooke material."""
+        mu = self.E / (2.0 * (1.0 + self.nu))
+        lmbda = self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
+        return lmbda, mu
+
+
+@dataclass(frozen=True)
+class Section:
+    torsion: str = "polar"
+
+
+@dataclass(frozen=True)
+class Load:
+    line_load: float = -8000.0
+    tip_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ramp_time: float = 300e-6
+
+    def factor(self, t: float) -> float:
+        """Load ramp: linear from 0 at t = 0 to 1 at ramp_time, then constant."""
+        if self.ramp_time <= 0.0 or t >= self.ramp_time:
+            return 1.0
+        return max(t, 0.0) / self.ramp_time
+
+
+@dataclass(frozen=True)
+class Rotation:
+    rpm: float = 1000.0
+    profile: str = "constant"
+    spinup_time: float = 0.0
+
+    @property
+    def omega(self) -> float:
+        """Steady angular speed Omega_s (rad/s)."""
+        return self.rpm * 2.0 * math.pi / 60.0
+
+
+@dataclass(frozen=True)
+class Damping:
+    c: float = 1000.0
+    model: str = "relative"
+
+
+@dataclass(frozen=True)
+class MeshSpec:
+    solid: tuple[int, int, int] = (100, 12, 6)
+    beam_elements: int = 10
+    ancf_root: str = "free-axial"
+
+
+@dataclass(frozen=True)
+class Reduction:
+    ffrf_modes: int = 30
+    gcms_modes: int = 90
+    gcms_gram_tol: float = 1e-6
+
+
+@dataclass(frozen=True)
+class Scene:
+    geometry: Geometry = field(default_factory=Geometry)
+    material: Material = field(default_factory=Material)
+    section: Section = field(default_factory=Section)
+    load: Load = field(default_factory=Load)
+    rotation: Rotation = field(default_factory=Rotation)
+    damping: Damping = field(default_factory=Damping)
+    mesh: MeshSpec = field(default_factory=MeshSpec)
+    reduction: Reduction = field(default_factory=Reduction)
+
+    def to_dict(self) -> dict:
+        """The full resolved scene as plain JSON-able data (tuples become lists)."""
+        return json.loads(json.dumps(dataclasses.asdict(self)))
+
+    @property
+    def hash(self) -> str:
+        """Stable 16-hex-digit hash of the resolved scene (keys sorted, floats as repr)."""
+        text = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def replace(self, **sections) -> "Scene":
+        """Copy with whole sections or dotted keys replaced: ``replace(**{"rotation.rpm": 5e3})``."""
+        new = self
+        for key, value in sections.items():
+            if "." in key:
+                sec, name = key.split(".", 1)
+                new = dataclasses.replace(new, **{sec: dataclasses.replace(getattr(new, sec),
+                                                                         **{name: value})})
+            else:
+                new = dataclasses.replace(new, **{key: value})
+        return new
