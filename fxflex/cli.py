@@ -25,6 +25,9 @@ __all__ = ["main"]
 log = logging.getLogger("fxflex")
 
 
+BENCHES = ("steady", "tlf", "reduced", "beams", "paper", "accuracy", "stability", "skip")
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse whose errors are one line: ``fxflex: error: <what> ; allowed: ...``."""
 
@@ -112,6 +115,13 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--sample-dt", type=_positive("--sample-dt"), metavar="DT",
                    help="output interval (s); default max(dt, t_end/20000)")
     _common(p)
+    p = sub.add_parser("bench", help="benchmarks; tables written to --out")
+    p.add_argument("name", choices=BENCHES, metavar="NAME", help=" | ".join(BENCHES))
+    p.add_argument("--out", metavar="DIR", default="out/bench",
+                   help="output folder (default out/bench)")
+    p.add_argument("--quick", action="store_true",
+                   help="smaller meshes and fewer repeats (a smoke run, not the reported figures)")
+    _common(p)
     return parser
 
 
@@ -156,7 +166,8 @@ def cmd_info(args, comm) -> None:
     lines.append("methods:")
     for m in methods:
         d = dofs[m]
-        lines.append(f"  {m:5s} dof {d if d is not None else 'n/a':>7}   {method_info()[m]}")
+        lines.append(f"  {m:5s} dof {d if d is not None else '-':>7}   {method_info()[m]}"
+                     + ("" if d is not None else "  (not implemented yet)"))
     _emit(comm, args, payload, "\n".join(lines))
 
 
@@ -249,7 +260,30 @@ def cmd_run(args, comm) -> None:
     _emit(comm, args, payload, text)
 
 
-COMMANDS = {"info": cmd_info, "steady": cmd_steady, "run": cmd_run}
+def cmd_bench(args, comm) -> None:
+    """Each benchmark is a module fxflex.bench.<name> with ``run(scene, out_dir, comm, quick)``
+    returning a JSON-able dict and writing its tables (Markdown) and data into out_dir."""
+    import importlib
+
+    from fxflex.io import envelope
+
+    scene = _scene_from_args(args)
+    try:
+        module = importlib.import_module(f"fxflex.bench.{args.name}")
+    except ModuleNotFoundError as exc:
+        if exc.name == f"fxflex.bench.{args.name}":
+            raise FxflexError(f"bench: {args.name} is not implemented yet") from None
+        raise
+    out_dir = os.path.abspath(os.path.join(args.out, args.name))
+    if comm.rank == 0:
+        os.makedirs(out_dir, exist_ok=True)
+    comm.Barrier()
+    result = module.run(scene, out_dir, comm, quick=args.quick)
+    payload = envelope(scene, bench=args.name, out_dir=out_dir, **result)
+    _emit(comm, args, payload, result.get("summary", f"bench {args.name}: see {out_dir}"))
+
+
+COMMANDS = {"info": cmd_info, "steady": cmd_steady, "run": cmd_run, "bench": cmd_bench}
 
 
 def _quiet_logs() -> None:
