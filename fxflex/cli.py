@@ -112,6 +112,10 @@ def make_parser() -> argparse.ArgumentParser:
                    help="internal force route: tlf ufl|invariant, nebb/ancf invariant|element")
     p.add_argument("--mass", choices=("consistent", "lumped"), help="tlf mass matrix")
     p.add_argument("--out", metavar="FILE.csv", help="write the time series as it goes")
+    p.add_argument("--fields", metavar="FILE.xdmf",
+                   help="write the displacement field every --fields-every samples (solids)")
+    p.add_argument("--fields-every", type=int, default=100, metavar="N",
+                   help="samples between field snapshots, default 100")
     p.add_argument("--sample-dt", type=_positive("--sample-dt"), metavar="DT",
                    help="output interval (s); default max(dt, t_end/20000)")
     _common(p)
@@ -210,13 +214,22 @@ def cmd_run(args, comm) -> None:
     options = BuildOptions(force_eval=args.force_eval, mass=args.mass, need_steady=False)
     check_options(args.method, options)
     integrator, dt = default_integration(args.method, args.integrator, args.dt)
-    if args.out:
-        folder = os.path.dirname(os.path.abspath(args.out))
-        if not os.path.isdir(folder):
-            raise FxflexError(f"--out: directory does not exist: {folder}")
+    for flag in ("out", "fields"):
+        path = getattr(args, flag)
+        if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
+            raise FxflexError(f"--{flag}: directory does not exist: "
+                              f"{os.path.dirname(os.path.abspath(path))}")
+    if args.fields_every < 1:
+        raise FxflexError(f"--fields-every: must be >= 1, got {args.fields_every}")
     t0 = time.perf_counter()
     form = build(args.method, scene, comm, options)
     t_pre = time.perf_counter() - t0
+    fields = None
+    if args.fields:
+        open_fields = getattr(form, "field_writer", None)
+        if open_fields is None:
+            raise FxflexError(f"--fields: not available for {args.method} (solid methods only)")
+        fields = open_fields(args.fields)
     nsteps = max(int(round(args.t_end / dt)), 1)
     sample_dt = args.sample_dt or max(dt, args.t_end / 20000)
     sample_every = max(1, int(round(sample_dt / dt)))
@@ -230,9 +243,14 @@ def cmd_run(args, comm) -> None:
     progress = Progress(nsteps, f"{args.method} {integrator} dt={dt:.3g}",
                         enabled=comm.rank == 0)
 
-    def on_sample(t, tip, extras):
+    count = [0]
+
+    def on_sample(t, tip, extras, q=None):
         if writer is not None:
             writer.write((t, *tip, *extras))
+        if fields is not None and count[0] % args.fields_every == 0:
+            fields.write(t, q)
+        count[0] += 1
 
     try:
         res = simulate(form, integrator, dt, args.t_end, sample_every=sample_every,
@@ -240,6 +258,8 @@ def cmd_run(args, comm) -> None:
     finally:
         if writer is not None:
             writer.close()
+        if fields is not None:
+            fields.close()
     progress.close(f"{res.steps} steps")
     diverged = diagnose(form, integrator, dt, res) if res.diverged else None
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,

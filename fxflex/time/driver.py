@@ -40,7 +40,8 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
              t0: float = 0.0, state: tuple[np.ndarray, np.ndarray] | None = None) -> RunResult:
     """Integrate ``form`` from t0 to t_end with step dt.
 
-    on_sample(t, tip, extras) is called at step 0, every ``sample_every`` steps and at the end.
+    on_sample(t, tip, extras, q) is called at step 0, every ``sample_every`` steps and at the end
+    (q is the live state array: copy it to keep it).
     """
     if dt <= 0 or not math.isfinite(dt):
         raise ValueError("dt must be positive")
@@ -57,7 +58,7 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
         if keep_history:
             history.append((t, *tip, *ex))
         if on_sample is not None:
-            on_sample(t, tip, ex)
+            on_sample(t, tip, ex, q)
         return tip
 
     check_every = max(1, min(sample_every, 100))

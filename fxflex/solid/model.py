@@ -1,0 +1,190 @@
+"""The solid discretisation shared by FFRF, GCMS and TLF.
+
+Q1 hexahedra (paper Eq. 8) on the gmsh mesh, the root face clamped, quadrature degree set
+explicitly (2 = 2x2x2 Gauss, exact for the linear part on affine cells; the paper used 3x3x3).
+Builds the loads of SPEC section 1 -- consistent nodal forces of the centerline line load and the
+tip force as a uniform traction over the tip face -- and the tip probe (the tip section centre is a
+mesh node that lives on one rank; its displacement is shared with allreduce).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from petsc4py import PETSc
+
+from fxflex.mesh.solid import ROOT, TIP, build_solid_mesh
+from fxflex.scene import Scene
+from fxflex.scene.kinematics import rotation_z
+from fxflex.solid import forms
+
+__all__ = ["SolidModel", "solid_dof_count"]
+
+
+def solid_dof_count(scene: Scene) -> int:
+    """Nodal unknowns after the root clamp: 3 nx (ny + 1) (nz + 1)."""
+    nx, ny, nz = scene.mesh.solid
+    return 3 * nx * (ny + 1) * (nz + 1)
+
+
+class SolidModel:
+    """Mesh, function space, clamp, loads and tip probe of the solid beam."""
+
+    def __init__(self, scene: Scene, comm, *, divisions=None, quadrature_degree: int = 2):
+        t0 = time.perf_counter()
+        self.scene, self.comm = scene, comm
+        self.divisions = tuple(divisions or scene.mesh.solid)
+        sm = build_solid_mesh(scene.geometry, self.divisions, comm)
+        self.solid_mesh, self.mesh, self.shape = sm, sm.mesh, sm.shape
+        self.timings = {"mesh": time.perf_counter() - t0}
+        self.quadrature_degree = quadrature_degree
+        md = {"quadrature_degree": quadrature_degree}
+        self.dx = ufl.dx(domain=self.mesh, metadata=md)
+        self.ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=sm.facet_tags, metadata=md)
+        self.V = fem.VectorFunctionSpace(self.mesh, ("Lagrange", 1))
+        imap = self.V.dofmap.index_map
+        self.n_owned_nodes = imap.size_local
+        self.n_owned = 3 * imap.size_local          # length of a state array on this rank
+        self.n_global_nodes = imap.size_global
+        ft = sm.facet_tags
+        root_facets = ft.indices[ft.values == ROOT]
+        self.root_nodes = fem.locate_dofs_topological(self.V, 2, root_facets)
+        self.bc = fem.dirichletbc(np.zeros(3, dtype=PETSc.ScalarType), self.root_nodes, self.V)
+        owned_root = self.root_nodes[self.root_nodes < self.n_owned_nodes]
+        self.root_owned = owned_root                 # owned block (node) indices on the root
+        n_root = comm.allreduce(owned_root.size)
+        self.dof = 3 * (self.n_global_nodes - n_root)
+        self.X0 = ufl.SpatialCoordinate(self.mesh)
+        self.u_test = ufl.TestFunction(self.V)
+        self.u_trial = ufl.TrialFunction(self.V)
+        self._locate_centerline()
+        self.rho = scene.material.rho
+
+    # -- geometry --------------------------------------------------------------------------------
+    def _locate_centerline(self) -> None:
+        g = self.scene.geometry
+        tol = 1e-9 * g.length
+        nodes = fem.locate_dofs_geometrical(
+            self.V, lambda x: (np.abs(x[1]) < tol) & (np.abs(x[2]) < tol))
+        nodes = nodes[nodes < self.n_owned_nodes]
+        coords = self.V.tabulate_dof_coordinates()
+        self.center_nodes = nodes
+        self.center_x = coords[nodes, 0] - g.hub_radius   # distance from the root
+        tip = nodes[np.abs(self.center_x - g.length) < tol]
+        self.tip_node = int(tip[0]) if tip.size else None
+        self.x0_tip = np.array([g.hub_radius + g.length, 0.0, 0.0])
+        count = self.comm.allreduce(nodes.size)
+        if count != self.divisions[0] + 1 or self.comm.allreduce(tip.size) != 1:
+            raise RuntimeError(f"centerline: found {count} nodes, expected {self.divisions[0] + 1}")
+
+    def node_coordinates(self) -> np.ndarray:
+        """Undeformed coordinates X0 of the owned nodes, shape (n_owned_nodes, 3)."""
+        return self.V.tabulate_dof_coordinates()[: self.n_owned_nodes].copy()
+
+    # -- assembly ---------------------------------------------------------------------------------
+    def compile(self, form):
+        return fem.form(form)
+
+    def matrix(self, a, *, bcs=None, diagonal: float = 1.0) -> PETSc.Mat:
+        """Assemble a bilinear form; clamped rows/columns zero with ``diagonal`` on them."""
+        from dolfinx.fem.petsc import assemble_matrix
+
+        bcs = [self.bc] if bcs is None else bcs
+        A = assemble_matrix(a if isinstance(a, fem.FormMetaClass) else fem.form(a), bcs=bcs,
+                            diagonal=diagonal)
+        A.assemble()
+        return A
+
+    def vector(self, L, *, zero_clamped: bool = True) -> PETSc.Vec:
+        """Assemble a linear form into an owned+ghost PETSc vector (clamped entries zero)."""
+        from dolfinx.fem.petsc import assemble_vector, set_bc
+
+        b = assemble_vector(L if isinstance(L, fem.FormMetaClass) else fem.form(L))
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if zero_clamped:
+            set_bc(b, [self.bc])
+        return b
+
+    def new_vector(self) -> PETSc.Vec:
+        return fem.Function(self.V).vector.copy()
+
+    # -- standard operators -----------------------------------------------------------------------
+    def stiffness_form(self):
+        return forms.linear_elastic(self.scene.material, self.u_trial, self.u_test, self.dx)
+
+    def mass_form(self):
+        return forms.mass(self.rho, self.u_trial, self.u_test, self.dx)
+
+    def mass_P_form(self):
+        return forms.mass_P(self.rho, self.u_trial, self.u_test, self.dx)
+
+    def mass_S_form(self):
+        return forms.mass_S(self.rho, self.u_trial, self.u_test, self.dx)
+
+    def centrifugal_form(self):
+        return forms.centrifugal(self.rho, self.X0, self.u_test, self.dx)
+
+    def euler_form(self):
+        return forms.euler(self.rho, self.X0, self.u_test, self.dx)
+
+    # -- loads ------------------------------------------------------------------------------------
+    def line_load_vector(self) -> PETSc.Vec:
+        """Consistent nodal forces of the centerline line load (full magnitude, along z).
+
+        Along the centerline the Q1 shape functions restrict to linear hats, so a uniform load q
+        gives q h at interior nodes and q h / 2 at the two ends (h = L / nx).
+        """
+        b = self.new_vector()
+        h = self.scene.geometry.length / self.divisions[0]
+        w = np.where((self.center_x < 0.5 * h) | (self.center_x > self.scene.geometry.length
+                                                   - 0.5 * h), 0.5 * h, h)
+        with b.localForm() as bl:
+            bl.set(0.0)
+        arr = b.getArray()
+        arr[3 * self.center_nodes + 2] = self.scene.load.line_load * w
+        self._zero_clamped(b)
+        return b
+
+    def tip_traction_vectors(self) -> list[PETSc.Vec]:
+        """Nodal forces of a unit force (1 N) along X, Y, Z spread uniformly over the tip face."""
+        area = self.comm.allreduce(fem.assemble_scalar(fem.form(1.0 * self.ds(TIP))))
+        out = []
+        for i in range(3):
+            e = np.zeros(3)
+            e[i] = 1.0 / area
+            out.append(self.vector(forms.traction(fem.Constant(self.mesh, e), self.u_test,
+                                                  self.ds(TIP))))
+        return out
+
+    def _zero_clamped(self, b: PETSc.Vec) -> None:
+        from dolfinx.fem.petsc import set_bc
+        set_bc(b, [self.bc])
+
+    def rotating_load(self) -> PETSc.Vec:
+        """Full external load in O-XYZ after the ramp: line load + tip force (SPEC section 1)."""
+        b = self.line_load_vector()
+        f = np.asarray(self.scene.load.tip_force, float)
+        if np.any(f):
+            for fi, vec in zip(f, self.tip_traction_vectors()):
+                b.axpy(fi, vec)
+        return b
+
+    # -- probe ------------------------------------------------------------------------------------
+    def tip_displacement(self, array: np.ndarray) -> np.ndarray:
+        """Displacement of the tip section centre from an owned-part array (3 per node)."""
+        local = np.zeros(3)
+        if self.tip_node is not None:
+            local[:] = array[3 * self.tip_node: 3 * self.tip_node + 3]
+        return self.comm.allreduce(local)
+
+    def tip_relative(self, array: np.ndarray, phi: float = 0.0) -> np.ndarray:
+        """Rotating-frame deflection U = A^T (x0 + u) - x0 of the tip centre for an inertial
+        displacement array (SPEC section 2); phi = 0 for arrays already in O-XYZ."""
+        u = self.tip_displacement(array)
+        if phi == 0.0:
+            return u
+        A = rotation_z(phi)
+        return A.T @ (self.x0_tip + u) - self.x0_tip
