@@ -1,0 +1,363 @@
+"""ANCF: absolute nodal coordinate formulation, second-order beam (paper Sect. 3.3, Eq. 49-57).
+
+Every node carries 21 coordinates (Eq. 50-51, n = 2): position r, the axial gradient dr/dX~ and the
+five cross-section gradients of the Pascal triangle (d/dY~, d/dZ~, d2/dY~2, d2/dY~dZ~, d2/dZ~2).
+Eq. 52 interpolates the centerline with cubic Hermite functions and the section gradients linearly,
+x = N(X~) e. The local coordinates span the straight prism X~ in [0, L], Y~ in [-b0/2, b0/2],
+Z~ in [-h0/2, h0/2] (b0, h0 the root sizes); the reference configuration e0 maps it onto the
+tapered twisted beam: at node k, r = (R + x_k, 0, 0), dr/dX~ = e_X, dr/dY~ = b(x_k)/b0 (0, cos t,
+sin t), dr/dZ~ = h(x_k)/h0 (0, -sin t, cos t), second-order gradients zero (t the twist angle).
+Between nodes the linear interpolation of the section gradients is the chord of the twist (a
+0.08 % shrink of the section at mid-element with 10 elements).
+
+Green-Lagrange strain on u = N (e - e0) (Eq. 53), St.Venant-Kirchhoff material, 5 x 3 x 3 Gauss
+points per element; elastic force by the invariant tensors of :mod:`fxflex.beam.invariants` (Eq. 55,
+57): ``force_eval = "invariant"`` (system invariant matrices) or ``"element"`` (element invariant
+matrices, ref. [49]). Mass Eq. 54 (constant), damping Eq. 56 (relative: c/rho M (e' - phi' S e),
+because e_r = A e0 moves rigidly) or Eq. 69 (absolute: c/rho M (e' - e_r')), external load on the
+centerline. The root node follows the drive: its coordinates are A(phi(t)) e0, except dr/dX~,
+which stays free with the default ``mesh.ancf_root = "free-axial"`` (SPEC section 1).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import _sparsetools
+
+from fxflex.beam.elements import ANCF_SLOTS, ancf_tables, gauss
+from fxflex.beam.invariants import GramChain, _matvec
+from fxflex.beam.line import beam_line
+from fxflex.beam.linear import growth_rate, newton, omega_max
+from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
+from fxflex.scene import Drive, Scene
+from fxflex.scene.kinematics import P3, S3
+
+__all__ = ["build", "dof_count", "ANCF", "constrained_slots", "QUADRATURE", "elasticity_matrix",
+           "reference_coordinates"]
+
+#: Gauss points per element: along X~, Y~, Z~ (the paper's 5 x 3 x 3)
+QUADRATURE = (5, 3, 3)
+SLOTS = len(ANCF_SLOTS)
+DPN = 3 * SLOTS
+
+
+def constrained_slots(scene: Scene) -> tuple[int, ...]:
+    """Root-node slots prescribed by the drive: all but dr/dX~ ("free-axial") or all ("full")."""
+    return tuple(range(SLOTS)) if scene.mesh.ancf_root == "full" else (0, 2, 3, 4, 5, 6)
+
+
+def elasticity_matrix(scene: Scene) -> np.ndarray:
+    """Isotropic 6 x 6 matrix of moduli, Voigt order xx yy zz xy yz zx, engineering shears."""
+    lam, mu = scene.material.lame
+    C = np.zeros((6, 6))
+    C[:3, :3] = lam
+    C[:3, :3] += 2 * mu * np.eye(3)
+    C[3:, 3:] = mu * np.eye(3)
+    return C
+
+
+def reference_coordinates(scene: Scene) -> np.ndarray:
+    """e0: (n_nodes, 7, 3) reference nodal coordinates of the tapered twisted beam."""
+    line = beam_line(scene, 1)
+    g = scene.geometry
+    b, h, th = line.shape.sizes(line.x_nodes)
+    e0 = np.zeros((line.n_nodes, SLOTS, 3))
+    e0[:, 0, 0] = g.hub_radius + line.x_nodes
+    e0[:, 1, 0] = 1.0
+    e0[:, 2, 1], e0[:, 2, 2] = b / g.root_y * np.cos(th), b / g.root_y * np.sin(th)
+    e0[:, 3, 1], e0[:, 3, 2] = -h / g.root_z * np.sin(th), h / g.root_z * np.cos(th)
+    return e0
+
+
+def _voigt_linear(nx: np.ndarray) -> np.ndarray:
+    """B_L (..., 6, 3m): linear Green strain per coordinate (slot a, component i), Eq. 30."""
+    shape = nx.shape[:-2]
+    m = nx.shape[-2]
+    B = np.zeros(shape + (6, m, 3))
+    for i in range(3):
+        B[..., i, :, i] = nx[..., i]
+    for v, (j, k) in zip((3, 4, 5), ((0, 1), (1, 2), (2, 0))):
+        B[..., v, :, j] = nx[..., k]
+        B[..., v, :, k] = nx[..., j]
+    return B.reshape(shape + (6, 3 * m))
+
+
+def _voigt_pairs(nx: np.ndarray) -> np.ndarray:
+    """w_ab (..., 6, m, m): the Green strain of a unit Gram entry P_ab (times 2 on the normal
+    components), so that eps_N = 1/2 sum_ab P_ab w_ab."""
+    out = [np.einsum("...a,...b->...ab", nx[..., i], nx[..., i]) for i in range(3)]
+    for j, k in ((0, 1), (1, 2), (2, 0)):
+        out.append(np.einsum("...a,...b->...ab", nx[..., j], nx[..., k])
+                   + np.einsum("...a,...b->...ab", nx[..., k], nx[..., j]))
+    return np.stack(out, axis=-3)
+
+
+class ANCF:
+    """Second-order ANCF beam in the inertial frame; see the module docstring."""
+
+    method = "ancf"
+    extra_columns: tuple[str, ...] = ()
+
+    def __init__(self, scene: Scene, force_eval: str | None = None):
+        from mpi4py import MPI
+
+        t0 = time.perf_counter()
+        self.scene, self.comm = scene, MPI.COMM_SELF
+        self.force_eval = force_eval or FORCE_EVAL["ancf"][0]
+        self.drive = Drive(scene.rotation)
+        rho = scene.material.rho
+        self.c_rho = scene.damping.c / rho
+        self.absolute = scene.damping.model == "absolute"
+        g = scene.geometry
+        line = self.line = beam_line(scene, QUADRATURE[0])
+        n_el, n_nodes, le = line.n_el, line.n_nodes, line.le
+        self.n_slots, self.n_full = SLOTS * n_nodes, DPN * n_nodes
+        self.e0n = reference_coordinates(scene)
+        self.e0 = self.e0n.reshape(-1).copy()
+        # quadrature points: tensor Gauss rule on the prism
+        (xa, wa), (yb, wb), (zc, wc) = (gauss(n) for n in QUADRATURE)
+        yb, zc = (yb - 0.5) * g.root_y, (zc - 0.5) * g.root_z
+        X, Y, Z = (a.ravel() for a in np.meshgrid(xa, yb, zc, indexing="ij"))
+        wq = np.einsum("a,b,c->abc", wa * le, wb * g.root_y, wc * g.root_z).ravel()
+        tab = self.tab = ancf_tables(X, Y, Z, le)
+        # reference Jacobian dx0/dX~ (Eq. 30: derivatives w.r.t. x0 through its inverse)
+        e0e = np.stack([self.e0n[:-1], self.e0n[1:]], axis=1).reshape(n_el, 2 * SLOTS, 3)
+        J = np.einsum("eai,qaj->eqij", e0e, tab.dN)
+        self.detJ = np.linalg.det(J)
+        nx = np.einsum("qaj,eqji->eqai", tab.dN, np.linalg.inv(J))
+        dV = self.detJ * wq
+        C = self.C = elasticity_matrix(scene)
+        BL = _voigt_linear(nx)                                         # (n_el, nq, 6, 42)
+        W = _voigt_pairs(nx)                                           # (n_el, nq, 6, 14, 14)
+        CBL = np.einsum("vw,eqwk->eqvk", C, BL)
+        self.KLe = np.einsum("eq,eqvk,eqvl->ekl", dV, BL, CBL)
+        T1 = np.einsum("eq,eqvk,eqvcd->ekcd", dV, CBL, W)
+        Wf = W.reshape(n_el, -1, 6, (2 * SLOTS) ** 2)
+        T4 = np.einsum("eq,eqvA,vw,eqwB->eAB", dV, Wf, C, Wf).reshape((n_el,) + (2 * SLOTS,) * 4)
+        emap = np.arange(2 * DPN).reshape(2 * SLOTS, 3)
+        self.engine = GramChain(T1, T4, dpn=DPN, spn=SLOTS, emap=emap, esign=np.ones(emap.shape))
+        self.quad = {"nx": nx, "dV": dV}                               # for checks
+        # linear stiffness and scalar mass (Eq. 54: M = Ms x I_3), assembled
+        KL = np.zeros((self.n_full, self.n_full))
+        Ms = np.zeros((self.n_slots, self.n_slots))
+        Mse = rho * np.einsum("eq,qa,qb->eab", np.broadcast_to(dV, (n_el, len(wq))), tab.N, tab.N)
+        for e in range(n_el):
+            KL[DPN * e:DPN * (e + 2), DPN * e:DPN * (e + 2)] += self.KLe[e]
+            Ms[SLOTS * e:SLOTS * (e + 2), SLOTS * e:SLOTS * (e + 2)] += Mse[e]
+        self.KL_dense, self.Ms = KL, Ms
+        self.KL = sp.csr_matrix(KL)
+        self.Ms_csr = sp.csr_matrix(Ms)
+        # centerline line load (Eq. 43 analogue): f = q int N(X~, 0, 0)^T e_z dX~
+        xl, wl = gauss(QUADRATURE[0])
+        cl = ancf_tables(xl, np.zeros_like(xl), np.zeros_like(xl), le).N   # (nq, 14)
+        fe = scene.load.line_load * le * np.einsum("q,qa->a", wl, cl)
+        fq = np.zeros((n_nodes, SLOTS, 3))
+        fq[:-1, :, 2] += fe[:SLOTS]
+        fq[1:, :, 2] += fe[SLOTS:]
+        self.fq = fq.reshape(-1)
+        self.tip_dofs = slice(self.n_full - DPN, self.n_full - DPN + 3)
+        self.Ftip = np.asarray(scene.load.tip_force, float)
+        # root constraint: constrained slots follow the drive
+        self.con = np.array(constrained_slots(scene))
+        self.free = np.array([s for s in range(self.n_slots) if s not in set(self.con)])
+        self.root_free = self.free[self.free < SLOTS]
+        self.dof = 3 * len(self.free)
+        self.free_dofs = (3 * self.free[:, None] + np.arange(3)).ravel()
+        self.timings = {"assemble": time.perf_counter() - t0}
+        t1 = time.perf_counter()
+        Mff = Ms[np.ix_(self.free, self.free)]
+        Minv = np.linalg.inv(Mff)
+        self.Minv = 0.5 * (Minv + Minv.T)
+        self.Mfc = Ms[np.ix_(self.free, self.con)]
+        self.timings["factorise"] = time.perf_counter() - t1
+        # work arrays (the time loop allocates nothing)
+        n = self.n_full
+        self._u, self._F, self._Ku, self._d, self._Md = (np.zeros(n) for _ in range(5))
+        self._Ae0 = np.zeros((self.n_slots, 3))
+        self._acon = np.zeros((len(self.con), 3))
+        self._rhs = np.zeros((len(self.free), 3))
+        self._afree = np.zeros((len(self.free), 3))
+        self._col = np.zeros(self.n_slots)
+        self._A = np.eye(3)
+        self._Kacc = np.zeros((3, 3))
+        self._steady: SteadyState | None = None
+        self._omega_max: float | None = None
+
+    # ------------------------------------------------------------------ drive
+    def _rotate(self, phi: float) -> np.ndarray:
+        """A(phi) e0 for every slot into self._Ae0; returns A."""
+        c, s = math.cos(phi), math.sin(phi)
+        A = self._A
+        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = c, -s, s, c
+        np.matmul(self.e0n.reshape(-1, 3), A.T, out=self._Ae0)
+        return A
+
+    def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Undeformed beam in rigid rotation (NOTES.md): e = A(phi0) e0, e' = phi'(0) S e."""
+        phi, rate, _ = self.drive.state(0.0)
+        self._rotate(phi)
+        q = self._Ae0.reshape(-1).copy()
+        v = (rate * self._Ae0 @ S3.T).reshape(-1)
+        return q, v
+
+    def constrain(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """Root slots: e = A(phi) e0, e' = phi' S A e0."""
+        phi, rate, _ = self.drive.state(t)
+        self._rotate(phi)
+        q3, v3 = q.reshape(-1, 3), v.reshape(-1, 3)
+        for s in self.con:
+            x, y, z = self._Ae0[s]
+            q3[s, 0], q3[s, 1], q3[s, 2] = x, y, z
+            v3[s, 0], v3[s, 1], v3[s, 2] = -rate * y, rate * x, 0.0
+
+    # ------------------------------------------------------------------ forces
+    def add_elastic_force(self, u: np.ndarray, out: np.ndarray) -> None:
+        """out += Q_k = (K_L + K_N) (e - e0) (Eq. 55/57)."""
+        _matvec(self.KL, u, out)
+        if self.force_eval == "invariant":
+            self.engine.add_force_system(u, out)
+        else:
+            self.engine.add_force_element(u, out)
+
+    def elastic_force(self, e: np.ndarray) -> np.ndarray:
+        """Q_k at coordinates e (allocating; checks and Newton)."""
+        out = np.zeros(self.n_full)
+        self.add_elastic_force(np.ascontiguousarray(e - self.e0), out)
+        return out
+
+    def acceleration(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """out = M^-1 (Q_e - Q_d - Q_k) on the free coordinates (Eq. 57), the exact prescribed
+        acceleration (phi'' S - phi'^2 P) A e0 on the root's constrained ones."""
+        phi, rate, accel = self.drive.state(t)
+        A = self._rotate(phi)
+        u, F, Ku, d = self._u, self._F, self._Ku, self._d
+        np.subtract(q, self.e0, out=u)
+        Ku.fill(0.0)
+        self.add_elastic_force(u, Ku)
+        lam = self.scene.load.factor(t)
+        np.multiply(self.fq, lam, out=F)
+        if self.Ftip.any():
+            F[self.tip_dofs] += lam * (A @ self.Ftip)
+        F -= Ku
+        if self.c_rho:
+            # Eq. 56: e' - e_r' - phi' S (e - e_r) = e' - phi' S e; Eq. 69: e' - phi' S A e0
+            d3, src = d.reshape(-1, 3), (self._Ae0 if self.absolute else q.reshape(-1, 3))
+            d[:] = v
+            np.multiply(src[:, 1], rate, out=self._col)
+            d3[:, 0] += self._col
+            np.multiply(src[:, 0], rate, out=self._col)
+            d3[:, 1] -= self._col
+            self._Md.fill(0.0)
+            Ms = self.Ms_csr
+            _sparsetools.csr_matvecs(Ms.shape[0], Ms.shape[1], 3, Ms.indptr, Ms.indices, Ms.data,
+                                     d, self._Md)
+            self._Md *= self.c_rho
+            F -= self._Md
+        K = self._Kacc
+        np.multiply(S3, accel, out=K)
+        K -= (rate * rate) * P3
+        np.matmul(self._Ae0[self.con], K.T, out=self._acon)
+        F3, out3 = F.reshape(-1, 3), out.reshape(-1, 3)
+        nr = len(self.root_free)
+        rhs = self._rhs
+        rhs[:nr] = F3[self.root_free]
+        rhs[nr:] = F3[SLOTS:]
+        rhs -= self.Mfc @ self._acon
+        np.matmul(self.Minv, rhs, out=self._afree)
+        out3[self.con] = self._acon
+        out3[self.root_free] = self._afree[:nr]
+        out3[SLOTS:] = self._afree[nr:]
+
+    def tip(self, t: float, q: np.ndarray) -> np.ndarray:
+        """U = A^T x_tip - x0_tip: the rigid rotation removed (SPEC section 2)."""
+        A = self.drive.A(t)
+        x = np.asarray(q[self.tip_dofs], float)
+        return A.T @ x - self.e0[self.tip_dofs]
+
+    # ------------------------------------------------------------------ rotating-frame statics
+    def _full(self, x_free: np.ndarray) -> np.ndarray:
+        e = self.e0.copy()
+        e[self.free_dofs] = x_free
+        return e
+
+    def _static_residual(self, x: np.ndarray, s: float) -> np.ndarray:
+        """Rotating frame at speed sqrt(s) Omega, loads x s: Q_k(e) - Omega^2 M P e
+        [+ c/rho Omega M S (e - e0)] - Q_e (NOTES.md), on the free coordinates."""
+        e = self._full(x)
+        rate = math.sqrt(s) * self.scene.rotation.omega
+        e3 = e.reshape(-1, 3)
+        r = self.elastic_force(e)
+        r -= rate**2 * (self.Ms @ (e3 @ P3.T)).reshape(-1)
+        if self.absolute:
+            r += self.c_rho * rate * (self.Ms @ ((e3 - self.e0n.reshape(-1, 3)) @ S3.T)).reshape(-1)
+        r -= s * self.fq
+        r[self.tip_dofs] -= s * self.Ftip
+        return r[self.free_dofs]
+
+    def tangent_stiffness(self, e: np.ndarray) -> np.ndarray:
+        """dQ_k/de (dense, all coordinates)."""
+        return self.KL_dense + self.engine.tangent(np.ascontiguousarray(e - self.e0))
+
+    def _effective_stiffness(self, e: np.ndarray, rate: float) -> np.ndarray:
+        K = self.tangent_stiffness(e) - rate**2 * np.kron(self.Ms, P3)
+        if self.absolute:
+            K += self.c_rho * rate * np.kron(self.Ms, S3)
+        return K[np.ix_(self.free_dofs, self.free_dofs)]
+
+    def steady_state(self) -> SteadyState:
+        """Rotating-frame equilibrium at the final speed by Newton (speed continuation if the
+        direct iteration fails); tip and coordinates expressed at phi = 0."""
+        if self._steady is not None:
+            return self._steady
+        t0 = time.perf_counter()
+        omega = self.scene.rotation.omega
+        tangent = lambda x, s: self._effective_stiffness(self._full(x), math.sqrt(s) * omega)
+        x0 = self.e0[self.free_dofs]
+        x, its, hist, ok = newton(self._static_residual, tangent, x0)
+        if not ok:
+            x, its, hist, ok = newton(self._static_residual, tangent, x0,
+                                      steps=tuple(np.linspace(0.1, 1.0, 10)))
+        e = self._full(x)
+        self._steady = SteadyState(tip=e[self.tip_dofs] - self.e0[self.tip_dofs], q=e,
+                                   iterations=its, residuals=hist, converged=ok,
+                                   timings={"steady": time.perf_counter() - t0})
+        return self._steady
+
+    def linearise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M, C, K) about the steady state in the rotating frame, free coordinates: C = 2 Omega
+        M S + c/rho M, K = K_T(e*) - Omega^2 M P [+ c/rho Omega M S, absolute model]."""
+        e = self.steady_state().q
+        omega = self.scene.rotation.omega
+        f = np.ix_(self.free_dofs, self.free_dofs)
+        M = np.kron(self.Ms, np.eye(3))[f]
+        C = 2 * omega * np.kron(self.Ms, S3)[f] + self.c_rho * M
+        return M, C, self._effective_stiffness(e, omega)
+
+    def growth_rate(self) -> tuple[float, float]:
+        return growth_rate(*self.linearise())
+
+    def stable(self, steady: SteadyState | None = None) -> bool:
+        return self.growth_rate()[0] <= 0.0
+
+    def omega_max(self) -> float:
+        """Highest circular frequency of the clamped beam at rest (K_L, M on the free
+        coordinates): the central-difference limit is dt < 2 / omega_max."""
+        if self._omega_max is None:
+            f = np.ix_(self.free_dofs, self.free_dofs)
+            self._omega_max = omega_max(self.KL_dense[f], np.kron(self.Ms, np.eye(3))[f])
+        return self._omega_max
+
+
+def build(scene: Scene, comm, options: BuildOptions | None = None) -> ANCF:
+    """Replicated on every rank: ``form.comm`` is COMM_SELF."""
+    options = options or BuildOptions()
+    return ANCF(scene, options.force_eval)
+
+
+def dof_count(scene: Scene) -> int:
+    """21 coordinates per node, minus the root's prescribed ones."""
+    return DPN * (scene.mesh.beam_elements + 1) - 3 * len(constrained_slots(scene))

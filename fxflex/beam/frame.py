@@ -1,0 +1,303 @@
+"""Floating frame of reference with relative nodal coordinates: what LEBB and NEBB share.
+
+The beam's elastic coordinates W (6 per node: W_X, W_Y, W_Z, theta_X, theta_Y, theta_Z, measured in
+the rotating frame O-XYZ, Eq. 36-37) describe the displacement U_f = N_c(X0) N_E(xi) W_fe of every
+point. With the rotation prescribed as phi(t), the reference coordinates q_r = (cos phi, sin phi)
+of Eq. 3 are known and their rows only carry the drive reaction; the elastic rows of Eq. 44 /
+Eq. 58 reduce to (NOTES.md, acceleration in the rotating frame)
+
+    M W'' + (2 phi' G + D) W' + (K_L + phi'' G - phi'^2 N) W + Q_N(W) = Q_e - phi'' g + phi'^2 n
+
+with the inertia shape integrals (derived here, the paper's Appendix is not in the text)
+
+    M = int rho N_f^T N_f dV           (M_ff of Eq. 39)
+    G = int rho N_f^T S N_f dV         (skew; the paper's -M_rf3 of Eq. 59, Coriolis)
+    N = int rho N_f^T P N_f dV         (the paper's M_rr6: spin softening)
+    g = int rho N_f^T S X0 dV,   n = int rho N_f^T P X0 dV    (n is the paper's M_rr2(,1))
+
+N_f = N_c N_E. Over a section N_c = N0 + Y0 N_Y + Z0 N_Z is linear in Y0, Z0, so each integral
+reduces to the section properties A, S_Y, S_Z, I_Y, I_Z, I_YZ of Eq. 41 (see
+:func:`section_quadratic`), then to Gauss quadrature along X. Damping (Eq. 42, terms in delta A
+ignored as in the paper): D = c/rho M (relative model); the absolute model F_d = -c (U' + phi' S U)
+adds the circulatory c/rho phi' G W (SPEC section 5). Q_N is zero for LEBB and the von Karman force
+for NEBB. The root node is clamped: the unknowns are the 6 n_el coordinates of the other nodes.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from fxflex.beam.elements import lebb_tables
+from fxflex.beam.line import beam_line
+from fxflex.beam.linear import growth_rate, newton, omega_max
+from fxflex.formulation import SteadyState
+from fxflex.scene import Drive, Scene
+from fxflex.scene.kinematics import P3, S3
+
+__all__ = ["FloatingFrameBeam", "section_quadratic", "section_linear", "N0", "NY", "NZ",
+           "QUADRATURE_POINTS"]
+
+#: Gauss points per element along X (exact to degree 11: the taper makes the integrands
+#: polynomials of degree <= 10 for an untwisted beam; the twist adds smooth trigonometric terms)
+QUADRATURE_POINTS = 6
+
+# N_c(X0) = N0 + Y0 NY + Z0 NZ (Eq. 36): small rotation theta x (0, Y0, Z0)
+N0 = np.hstack([np.eye(3), np.zeros((3, 3))])
+NY = np.zeros((3, 6))
+NY[0, 5], NY[2, 3] = -1.0, 1.0
+NZ = np.zeros((3, 6))
+NZ[0, 4], NZ[1, 3] = 1.0, -1.0
+_EX, _EY, _EZ = np.eye(3)
+
+
+def section_quadratic(Q: np.ndarray, sec) -> np.ndarray:
+    """int_A N_c^T Q N_c dA (6 x 6 at every station) for a constant 3 x 3 matrix Q."""
+    def sym(a, b):
+        return a.T @ Q @ b + b.T @ Q @ a
+    terms = ((sec.A, N0.T @ Q @ N0), (sec.S_Z, sym(N0, NY)), (sec.S_Y, sym(N0, NZ)),
+             (sec.I_Z, NY.T @ Q @ NY), (sec.I_Y, NZ.T @ Q @ NZ), (sec.I_YZ, sym(NY, NZ)))
+    return sum(np.asarray(c)[..., None, None] * m for c, m in terms)
+
+
+def section_linear(Q: np.ndarray, sec, X: np.ndarray) -> np.ndarray:
+    """int_A N_c^T Q X0 dA (6-vector at every station), X0 = (X, Y0, Z0), X = R + x."""
+    X = np.asarray(X)[..., None]
+    return (sec.A[..., None] * X * (N0.T @ Q @ _EX)
+            + sec.S_Z[..., None] * (X * (NY.T @ Q @ _EX) + N0.T @ Q @ _EY)
+            + sec.S_Y[..., None] * (X * (NZ.T @ Q @ _EX) + N0.T @ Q @ _EZ)
+            + sec.I_Z[..., None] * (NY.T @ Q @ _EY) + sec.I_Y[..., None] * (NZ.T @ Q @ _EZ)
+            + sec.I_YZ[..., None] * (NY.T @ Q @ _EZ + NZ.T @ Q @ _EY))
+
+
+def section_stiffness(scene: Scene, sec) -> np.ndarray:
+    """Cross-section stiffness matrix of Eq. 41 (4 x 4 at every station), generalized strains
+    (W_X', W_Z'', W_Y'', theta_X'); J_X per ``section.torsion``."""
+    E, G = scene.material.E, scene.material.G
+    out = np.zeros(sec.A.shape + (4, 4))
+    out[..., 0, 0] = E * sec.A
+    out[..., 0, 1] = out[..., 1, 0] = -E * sec.S_Y
+    out[..., 0, 2] = out[..., 2, 0] = -E * sec.S_Z
+    out[..., 1, 1] = E * sec.I_Y
+    out[..., 1, 2] = out[..., 2, 1] = E * sec.I_YZ
+    out[..., 2, 2] = E * sec.I_Z
+    out[..., 3, 3] = G * sec.J_X(scene.section.torsion)
+    return out
+
+
+def _assemble(blocks: np.ndarray, n_full: int, dpn: int) -> np.ndarray:
+    """Dense assembly of element matrices (n_el, 2 dpn, 2 dpn) or vectors of a chain."""
+    out = np.zeros((n_full,) * (blocks.ndim - 1))
+    for e, b in enumerate(blocks):
+        sl = slice(dpn * e, dpn * e + b.shape[0])
+        if b.ndim == 2:
+            out[sl, sl] += b
+        else:
+            out[sl] += b
+    return out
+
+
+class FloatingFrameBeam:
+    """LEBB (and, with a nonlinear force, NEBB) in the floating frame; see the module docstring."""
+
+    extra_columns = ("drive_torque_Nm",)
+    force_eval: str | None = None
+
+    def __init__(self, scene: Scene, method: str):
+        from mpi4py import MPI
+
+        t0 = time.perf_counter()
+        self.method, self.scene, self.comm = method, scene, MPI.COMM_SELF
+        self.drive = Drive(scene.rotation)
+        rho = scene.material.rho
+        self.c_rho = scene.damping.c / rho
+        self.absolute = scene.damping.model == "absolute"
+        line = self.line = beam_line(scene, QUADRATURE_POINTS)
+        tab = self.tab = lebb_tables(line.xi, line.le)
+        n_full = 6 * line.n_nodes
+        self.n_full, self.dof = n_full, 6 * line.n_el
+        sec, dx = line.sec, line.dx
+        X = line.hub_radius + line.xq
+        # element matrices by quadrature of the section integrals (Eq. 39, 41)
+        Ne = tab.N
+        mass = lambda Q: rho * np.einsum("eq,qai,eqab,qbj->eij", dx, Ne, section_quadratic(Q, sec),
+                                         Ne)
+        vec = lambda Q: rho * np.einsum("eq,qai,eqa->ei", dx, Ne, section_linear(Q, sec, X))
+        self.Me, Ge, Nme = mass(np.eye(3)), mass(S3), mass(P3)
+        self.KLe = np.einsum("eq,qai,eqab,qbj->eij", dx, tab.B, section_stiffness(scene, sec),
+                             tab.B)
+        fq_e = scene.load.line_load * np.einsum("eq,qi->ei", dx, Ne[:, 2, :])
+        full = {"M": _assemble(self.Me, n_full, 6), "G": _assemble(Ge, n_full, 6),
+                "N": _assemble(Nme, n_full, 6), "K": _assemble(self.KLe, n_full, 6),
+                "g": _assemble(vec(S3), n_full, 6), "n": _assemble(vec(P3), n_full, 6),
+                "fq": _assemble(fq_e, n_full, 6)}
+        # int rho X0^T P X0 dV: the undeformed beam's moment of inertia about the axis
+        self.I0 = float(rho * np.sum(dx * (sec.A * X**2 + 2 * X * sec.S_Z + sec.I_Z)))
+        f = slice(6, None)                                   # root node clamped
+        self.M, self.G, self.N = full["M"][f, f], full["G"][f, f], full["N"][f, f]
+        self.K = full["K"][f, f]
+        self.g, self.n, self.fq = full["g"][f], full["n"][f], full["fq"][f]
+        self.ftip = np.zeros(self.dof)
+        self.ftip[-6:-3] = scene.load.tip_force
+        self.timings = {"assemble": time.perf_counter() - t0}
+        t1 = time.perf_counter()
+        Minv = np.linalg.inv(self.M)
+        self.Minv = 0.5 * (Minv + Minv.T)
+        self.MiK, self.MiG, self.MiN = self.Minv @ self.K, self.Minv @ self.G, self.Minv @ self.N
+        self.Mi_fq, self.Mi_tip = self.Minv @ self.fq, self.Minv @ self.ftip
+        self.Mi_g, self.Mi_n = self.Minv @ self.g, self.Minv @ self.n
+        n = self.dof
+        self._Kq, self._Cv, self._nn = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
+        self._f = np.zeros(n)
+        self._w1, self._w2 = np.zeros(n), np.zeros(n)
+        self._Wfull, self._QN = np.zeros(n_full), np.zeros(n_full)
+        self._a_extra = np.zeros(n)
+        self._key = None
+        self.timings["factorise"] = time.perf_counter() - t1
+        self._steady: SteadyState | None = None
+        self._omega_max: float | None = None
+
+    # ------------------------------------------------------------------ nonlinear hooks (NEBB)
+    nonlinear = False
+
+    def add_nonlinear_force(self, Wfull: np.ndarray, out: np.ndarray) -> None:
+        """out += Q_N(W) on the full coordinate vector (root included); LEBB: nothing."""
+
+    def nonlinear_tangent(self, Wfull: np.ndarray) -> np.ndarray:
+        return np.zeros((self.n_full, self.n_full))
+
+    # ------------------------------------------------------------------ protocol
+    def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Undeformed and at rest relative to the frame: W = 0, W' = 0."""
+        return np.zeros(self.dof), np.zeros(self.dof)
+
+    def constrain(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """The clamp is built into the unknowns: nothing to do."""
+
+    def _coefficients(self, rate: float, accel: float) -> None:
+        """M^-1 (K_L + phi'' G - phi'^2 N [+ c/rho phi' G]) and M^-1 (2 phi' G + D), rebuilt only
+        when phi' or phi'' change (never at constant speed)."""
+        Kq, Cv, nn = self._Kq, self._Cv, self._nn
+        np.multiply(self.MiG, accel + (self.c_rho * rate if self.absolute else 0.0), out=Kq)
+        Kq += self.MiK
+        np.multiply(self.MiN, rate * rate, out=nn)
+        Kq -= nn
+        np.multiply(self.MiG, 2.0 * rate, out=Cv)
+        Cv.flat[::self.dof + 1] += self.c_rho
+        np.multiply(self.Mi_g, -accel, out=self._f)
+        np.multiply(self.Mi_n, rate * rate, out=self._w1)
+        self._f += self._w1
+        self._key = (rate, accel)
+
+    def acceleration(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """out = M^-1 [Q_e - (2 phi' G + D) W' - (K_L + phi'' G - phi'^2 N) W - Q_N(W)
+        - phi'' g + phi'^2 n] (Eq. 44/58 with the reference coordinates eliminated)."""
+        rate, accel = self.drive.rate(t), self.drive.accel(t)
+        if self._key != (rate, accel):
+            self._coefficients(rate, accel)
+        w1 = self._w1
+        np.dot(self._Kq, q, out=out)
+        np.dot(self._Cv, v, out=w1)
+        out += w1
+        np.negative(out, out=out)
+        out += self._f
+        lam = self.scene.load.factor(t)
+        np.multiply(self.Mi_fq, lam, out=w1)
+        out += w1
+        np.multiply(self.Mi_tip, lam, out=w1)
+        out += w1
+        if self.nonlinear:
+            self._Wfull[6:] = q
+            self._QN.fill(0.0)
+            self.add_nonlinear_force(self._Wfull, self._QN)
+            np.dot(self.Minv, self._QN[6:], out=w1)
+            out -= w1
+
+    def tip(self, t: float, q: np.ndarray) -> np.ndarray:
+        """W_X, W_Y, W_Z of the free-end node: already relative and in O-XYZ."""
+        return np.array(q[-6:-3], dtype=float)
+
+    def extras(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[float]:
+        """Drive torque about z (N m) from the eliminated reference rows: d/dt of the angular
+        momentum about the axis minus the moments of the loads and of the damping force.
+
+        T = g.W'' - W.G W'' + 2 phi' (n.W' + W.N W') + phi'' (I0 + 2 n.W + W.N W) - M_z(F_tip)
+            - M_z(F_d), with M_z(F_d) = c/rho (W.G W' - g.W') [- c/rho phi' (n.W + W.N W)]."""
+        rate, accel = self.drive.rate(t), self.drive.accel(t)
+        a = self._a_extra
+        self.acceleration(t, q, v, a)
+        torque = (self.g @ a - q @ (self.G @ a) + 2 * rate * (self.n @ v + q @ (self.N @ v))
+                  + accel * (self.I0 + 2 * self.n @ q + q @ (self.N @ q)))
+        Fx, Fy, _ = np.asarray(self.scene.load.tip_force) * self.scene.load.factor(t)
+        x_tip = self.line.hub_radius + self.line.length + q[-6]
+        torque -= x_tip * Fy - q[-5] * Fx
+        m_damp = self.c_rho * (q @ (self.G @ v) - self.g @ v)
+        if self.absolute:
+            m_damp -= self.c_rho * rate * (self.n @ q + q @ (self.N @ q))
+        return (float(torque - m_damp),)
+
+    # ------------------------------------------------------------------ steady state and stability
+    def _stiffness(self, W: np.ndarray, rate: float) -> np.ndarray:
+        """Effective tangent K_L + K_N,T(W) - phi'^2 N [+ c/rho phi' G]."""
+        K = self.K - rate**2 * self.N
+        if self.absolute:
+            K = K + self.c_rho * rate * self.G
+        if self.nonlinear:
+            Wf = np.zeros(self.n_full)
+            Wf[6:] = W
+            K = K + self.nonlinear_tangent(Wf)[6:, 6:]
+        return K
+
+    def _static_residual(self, W: np.ndarray, s: float) -> np.ndarray:
+        rate = np.sqrt(s) * self.scene.rotation.omega
+        r = (self.K - rate**2 * self.N) @ W - s * (self.fq + self.ftip) - rate**2 * self.n
+        if self.absolute:
+            r += self.c_rho * rate * self.G @ W
+        if self.nonlinear:
+            Wf, QN = np.zeros(self.n_full), np.zeros(self.n_full)
+            Wf[6:] = W
+            self.add_nonlinear_force(Wf, QN)
+            r += QN[6:]
+        return r
+
+    def steady_state(self) -> SteadyState:
+        """Rotating-frame equilibrium at the scene's final speed: LEBB solves Eq. 59 with the time
+        derivatives set to zero, (K_L - Omega^2 M_rr6) W = Q_e + Omega^2 M_rr2(,1) (one Newton
+        step); NEBB adds the von Karman force and iterates (Newton, speed continuation if needed)."""
+        if self._steady is not None:
+            return self._steady
+        t0 = time.perf_counter()
+        omega = self.scene.rotation.omega
+        tangent = lambda W, s: self._stiffness(W, np.sqrt(s) * omega)
+        W, its, hist, ok = newton(self._static_residual, tangent, np.zeros(self.dof))
+        if not ok and self.nonlinear:
+            W, its, hist, ok = newton(self._static_residual, tangent, np.zeros(self.dof),
+                                      steps=tuple(np.linspace(0.1, 1.0, 10)))
+        self._steady = SteadyState(tip=self.tip(0.0, W), q=W, iterations=its, residuals=hist,
+                                   converged=ok, timings={"steady": time.perf_counter() - t0})
+        return self._steady
+
+    def linearise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M, C, K) of the motion about the steady state (SPEC section 6): C = 2 Omega G + D,
+        K = K_L + K_N,T(W*) - Omega^2 N [+ c/rho Omega G for the absolute damping model]."""
+        W = self.steady_state().q
+        omega = self.scene.rotation.omega
+        C = 2 * omega * self.G + self.c_rho * self.M
+        return self.M.copy(), C, self._stiffness(W, omega)
+
+    def growth_rate(self) -> tuple[float, float]:
+        """Largest real part of the eigenvalues of the linearised rotating system and the
+        |imaginary part| of that root (1/s, rad/s)."""
+        return growth_rate(*self.linearise())
+
+    def stable(self, steady: SteadyState | None = None) -> bool:
+        """True when no eigenvalue of the linearised system has a positive real part."""
+        return self.growth_rate()[0] <= 0.0
+
+    def omega_max(self) -> float:
+        """Highest circular frequency of the clamped beam at rest, sqrt(max eig(K_L, M))."""
+        if self._omega_max is None:
+            self._omega_max = omega_max(self.K, self.M)
+        return self._omega_max
+

@@ -1,0 +1,74 @@
+"""Small dense linear algebra shared by the beam formulations: Newton steady states, the
+highest circular frequency, and the growth rate of the linearised rotating system.
+
+The beam models have at most a few thousand unknowns, so dense LAPACK is simple and fast.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as la
+
+__all__ = ["newton", "omega_max", "growth_rate", "companion_eigenvalues"]
+
+
+def newton(residual, tangent, x0: np.ndarray, *, rtol: float = 1e-10, maxit: int = 30,
+           steps: tuple[float, ...] = (1.0,)) -> tuple[np.ndarray, int, list[float], bool]:
+    """Solve residual(x, s) = 0 by Newton's method, s stepping through ``steps`` (a load and
+    speed-squared factor for continuation; the last must be 1). Converged when the residual norm
+    has dropped by rtol relative to its initial value at s = 1 (or to zero-state scale).
+
+    Returns (x, iterations, residual norms, converged)."""
+    x = np.array(x0, dtype=float)
+    history: list[float] = []
+    iterations = 0
+    ref = max(np.linalg.norm(residual(np.zeros_like(x), 1.0)), np.linalg.norm(residual(x, 1.0)))
+    ref = ref if ref > 0 else 1.0
+    converged = True
+    for s in steps:
+        ok = False
+        for _ in range(maxit):
+            r = residual(x, s)
+            rn = float(np.linalg.norm(r))
+            history.append(rn)
+            if rn <= rtol * ref:
+                ok = True
+                break
+            dx = la.solve(tangent(x, s), -r)
+            x += dx
+            iterations += 1
+            if np.linalg.norm(dx) <= 1e-14 * max(np.linalg.norm(x), 1e-300):
+                history.append(float(np.linalg.norm(residual(x, s))))
+                ok = history[-1] <= 1e3 * rtol * ref
+                break
+        converged = converged and ok
+        if not np.all(np.isfinite(x)):
+            return x, iterations, history, False
+    return x, iterations, history, converged
+
+
+def omega_max(K: np.ndarray, M: np.ndarray) -> float:
+    """Highest circular frequency sqrt(lambda_max) of K x = lambda M x (rad/s)."""
+    n = K.shape[0]
+    lam = la.eigh(K, M, eigvals_only=True, subset_by_index=[n - 1, n - 1])
+    return float(np.sqrt(max(lam[0], 0.0)))
+
+
+def companion_eigenvalues(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Eigenvalues lambda of (lambda^2 M + lambda C + K) x = 0 through the first-order companion
+    form [[0, I], [-M^-1 K, -M^-1 C]] (SPEC section 6; dense, fine at beam sizes)."""
+    n = M.shape[0]
+    MK = la.solve(M, K, assume_a="pos")
+    MC = la.solve(M, C, assume_a="pos")
+    A = np.zeros((2 * n, 2 * n))
+    A[:n, n:] = np.eye(n)
+    A[n:, :n] = -MK
+    A[n:, n:] = -MC
+    return la.eigvals(A)
+
+
+def growth_rate(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> tuple[float, float]:
+    """(largest real part, |imaginary part| of that root) of the quadratic eigenproblem."""
+    lam = companion_eigenvalues(M, C, K)
+    k = int(np.argmax(lam.real))
+    return float(lam[k].real), float(abs(lam[k].imag))
