@@ -1,0 +1,259 @@
+"""GCMS: floating frame, absolute elastic coordinates, global modes (paper Sect. 2.2).
+
+The elastic displacement is measured in the inertial frame, u_f = A U_f (Eq. 18). With rotation
+about z, A = cos(phi) G1 + sin(phi) G2 + G3 (G1 = P, G2 = S, G3 = e_z e_z^T), so every rotated FFRF
+displacement A_d Phi eta lies in the span of the 3m global modes (SPEC section 3)
+
+    Psi = [G1d Phi, G2d Phi, G3d Phi].
+
+They are nearly dependent. Their Gram matrix W = Psi^T M Psi has the block form
+[[N, G, 0], [-G, N, 0], [0, 0, I - N]] with the FFRF invariants N, G; its upper part is the real
+form of the Hermitian N - iG, so its eigenvalues come in equal pairs whose eigenvectors
+[a; b], [-b; a] span planes that the rotation maps onto themselves. Eigen-decomposing N - iG
+and I - N and dropping the directions whose M-norm (the square root of the eigenvalue) is below
+``reduction.gcms_gram_tol`` times the largest gives the M-orthonormal basis Psi~ = Psi T; the cut
+removes whole pairs, so span(Psi~) is still closed under A and the method stays exactly
+equivalent to a Galerkin FFRF on span(Psi~) (docs/reduced.md). A dropped direction has little
+mass but not little stiffness, and the clamped modes themselves need it: a cut is only harmless
+while the dropped eigenvalues stay far below (omega_1 / omega_max)^2.
+
+With u_f = Psi~ xi the mass is constant (Eq. 20: I), there is no quadratic velocity vector, and
+
+    xi'' + (c/rho) (xi' - [phi' J xi]) + K(phi) xi
+        = r(t) Psi~^T A_d F - phi'' w(phi) - phi'^2 w'(phi)                      (Eq. 24)
+
+- K(phi) = Psi~^T A_d K_L A_d^T Psi~ = sum_ij a_i a_j K_ij (a = (cos, sin, 1)) with the nine
+  constant K_ij = Psi~^T G_id K_L G_jd^T Psi~ (Eq. 21), evaluated per step in the equivalent
+  Fourier form K0 + cos K_c1 + sin K_s1 + cos2 K_c2 + sin2 K_s2;
+- w(phi) = Psi~^T int rho N^T A S X0 = cos w_S - sin w_P (w_S, w_P: the projected f_S, f_c): the
+  rigid-rotation inertia load M_rf^T q_r'' of Eq. 24;
+- damping Eq. 22-23 (relative): (c/rho) Psi~^T M (u_f' - phi' S u_f), J = Psi~^T M S_d Psi~;
+  the absolute model (Eq. 67) drops the J term.
+
+Rotating frame. Substituting xi = R(phi) zeta with R(phi) = Psi~^T M A_d Psi~ (orthogonal, R' =
+phi' J R) turns Eq. 24 at constant speed into the rotating-frame system of
+:mod:`fxflex.solid.reduced` with K_r = K(0), G_r = J, N_r = -J^2, n_r = w_P; its equilibrium zeta
+is the steady state (SPEC section 6), its eigenvalues the stability, and the deflection is
+U = A^T u_f (SPEC section 2).
+
+Drive torque: the phi row, tau = phi'' J0 + w(phi).xi'' + 1/2 xi^T K'(phi) xi - r(t) s0 - Q_phi^d
+with Q_phi^d = -(c/rho) (w.xi' [+ phi' w'.xi]) (Eq. 23, D_rf = c/rho M_rf).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from fxflex.errors import FxflexError
+from fxflex.formulation import BuildOptions
+from fxflex.scene import Scene
+from fxflex.scene.kinematics import P3, S3, rotation_z
+from fxflex.solid.cms import ClampedModes
+from fxflex.solid.model import SolidModel
+from fxflex.solid.reduced import (AffineStack, MeshData, ReducedFormulation, RotatingSystem,
+                                  inner, mat_apply, nodal, rotation_weights, tip_rows)
+
+__all__ = ["GCMS", "GlobalModes", "global_modes", "gram_cut", "build", "dof_count"]
+
+G3 = np.diag([0.0, 0.0, 1.0])
+
+
+def dof_count(scene: Scene) -> None:
+    """Not known before the eigenmodes: the Gram cut decides how many global modes remain."""
+    return None
+
+
+def gram_cut(N: np.ndarray, G: np.ndarray, W33: np.ndarray, tol: float
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """M-orthonormalise the global modes from the blocks of W (module docstring).
+
+    A direction is kept when its relative M-norm sqrt(mu / mu_max) is at least ``tol``. Returns
+    (T, mu, kept): T (3m, r) with Psi~ = Psi T, the Gram eigenvalues mu (all 3m, descending) and
+    the boolean mask of the kept ones.
+    """
+    m = N.shape[0]
+    lam_h, Z = np.linalg.eigh(N - 1j * G)          # each eigenvalue twice in W: [a;b], [-b;a]
+    lam_z, U = np.linalg.eigh(W33)
+    top = max(lam_h.max(), lam_z.max())
+    cols, mus = [], []
+    for lam, z in zip(lam_h, Z.T):
+        a, b = z.real, z.imag
+        for vec in (np.concatenate([a, b, np.zeros(m)]), np.concatenate([-b, a, np.zeros(m)])):
+            cols.append(vec)
+            mus.append(lam)
+    for lam, u in zip(lam_z, U.T):
+        cols.append(np.concatenate([np.zeros(2 * m), u]))
+        mus.append(lam)
+    mus = np.array(mus)
+    V = np.column_stack(cols)
+    order = np.argsort(-mus, kind="stable")
+    mus, V = mus[order], V[:, order]
+    kept = np.sqrt(np.maximum(mus, 0.0) / top) >= tol
+    T = V[:, kept] / np.sqrt(mus[kept])
+    return T, mus, kept
+
+
+def _block_maps(m: int) -> dict[str, np.ndarray]:
+    """Coefficient maps C_B with B_d Psi = Psi C_B for B = G1^T, G2^T, G3^T, S, P, G3."""
+    Z, I = np.zeros((m, m)), np.eye(m)
+    C1 = np.block([[I, Z, Z], [Z, I, Z], [Z, Z, Z]])        # P Psi = [Psi1, Psi2, 0]
+    C2 = np.block([[Z, I, Z], [-I, Z, Z], [Z, Z, Z]])       # -S Psi = [-Psi2, Psi1, 0]
+    C3 = np.block([[Z, Z, Z], [Z, Z, Z], [Z, Z, I]])        # G3 Psi = [0, 0, Psi3]
+    return {"G1T": C1, "G2T": C2, "G3T": C3, "S": -C2, "P": C1, "G3": C3}
+
+
+@dataclass
+class GlobalModes:
+    """The constant matrices and vectors of Eq. 24 on the M-orthonormal global modes."""
+
+    T: np.ndarray               # (3m, r): Psi~ = Psi T
+    gram: np.ndarray            # Gram eigenvalues (3m, descending)
+    kept: np.ndarray            # mask of the retained ones
+    K9: np.ndarray              # (3, 3, r, r): K_ij = Psi~^T G_id K_L G_jd^T Psi~
+    J: np.ndarray               # Psi~^T M S_d Psi~ (skew)
+    MP: np.ndarray              # Psi~^T M P_d Psi~
+    MG3: np.ndarray             # Psi~^T M G3_d Psi~
+    wS: np.ndarray              # Psi~^T f_S
+    wP: np.ndarray              # Psi~^T f_c
+    QP: np.ndarray              # Psi~^T P_d F
+    QS: np.ndarray              # Psi~^T S_d F
+    Q3: np.ndarray              # Psi~^T G3_d F
+    tip: np.ndarray             # (3, r): inertial tip displacement per unit xi
+    J0: float
+    s0: float
+
+    @property
+    def count(self) -> int:
+        return self.T.shape[1]
+
+
+def global_modes(model: SolidModel, data: MeshData, Phi: np.ndarray, tol: float) -> GlobalModes:
+    """Build Psi from Phi, cut its Gram matrix at ``tol`` and project (collective on model.comm)."""
+    comm, m = model.comm, Phi.shape[1]
+    Psi = np.hstack([nodal(P3, Phi), nodal(S3, Phi), nodal(G3, Phi)])
+    MPsi = mat_apply(data.M, Psi)
+    W = inner(comm, Psi, MPsi)
+    Kb = inner(comm, Psi, mat_apply(data.K, Psi))
+    Kb = 0.5 * (Kb + Kb.T)
+    s1, s2, s3 = slice(0, m), slice(m, 2 * m), slice(2 * m, 3 * m)
+    N = 0.5 * (W[s1, s1] + W[s2, s2])
+    G = 0.5 * (W[s1, s2] - W[s2, s1])
+    W33 = 0.5 * (W[s3, s3] + W[s3, s3].T)
+    T, mus, kept = gram_cut(N, 0.5 * (G - G.T), W33, tol)
+    C = _block_maps(m)
+    Y = [C[k] @ T for k in ("G1T", "G2T", "G3T")]
+    K9 = np.array([[Yi.T @ Kb @ Yj for Yj in Y] for Yi in Y])
+    Wt = T.T @ W
+
+    def proj(vec):
+        return T.T @ inner(comm, Psi, vec)
+
+    J = Wt @ C["S"] @ T
+    return GlobalModes(
+        T=T, gram=mus, kept=kept, K9=K9, J=0.5 * (J - J.T), MP=Wt @ C["P"] @ T,
+        MG3=Wt @ C["G3"] @ T, wS=proj(data.f_S), wP=proj(data.f_c), QP=proj(nodal(P3, data.F)),
+        QS=proj(nodal(S3, data.F)), Q3=proj(nodal(G3, data.F)), tip=tip_rows(model, Psi) @ T,
+        J0=data.J0, s0=data.load_torque)
+
+
+class GCMS(ReducedFormulation):
+    """GCMS on the global modes of ``reduction.gcms_modes / 3`` clamped modes.
+
+    ``model``, ``data`` and ``modes`` may be passed to share them with other builds; the first
+    ``gcms_modes / 3`` modes are used.
+    """
+
+    method = "gcms"
+
+    def __init__(self, scene: Scene, comm, options: BuildOptions | None = None, *,
+                 modes: ClampedModes | None = None, model: SolidModel | None = None,
+                 data: MeshData | None = None):
+        super().__init__(scene, comm)
+        n_global = scene.reduction.gcms_modes
+        if n_global % 3:
+            raise FxflexError(f"reduction.gcms_modes: must be a multiple of 3 (the global modes "
+                              f"are [G1d Phi, G2d Phi, G3d Phi]), got {n_global}")
+        t0 = time.perf_counter()
+        Phi = self._solid_and_modes(n_global // 3, model, data, modes)
+        t1 = time.perf_counter()
+        self.gm = gm = global_modes(self.model, self.data, Phi, scene.reduction.gcms_gram_tol)
+        self.dof = gm.count
+        K = gm.K9
+        self.K0 = 0.5 * (K[0, 0] + K[1, 1]) + K[2, 2]
+        self.Kc1, self.Ks1 = K[0, 2] + K[2, 0], K[1, 2] + K[2, 1]
+        self.Kc2, self.Ks2 = 0.5 * (K[0, 0] - K[1, 1]), 0.5 * (K[0, 1] + K[1, 0])
+        self.rot = RotatingSystem(K=self.stiffness(0.0), G=gm.J, N=-gm.J @ gm.J,
+                                  f=gm.QP + gm.Q3, n=gm.wP, tip=gm.tip)
+        kmats = [-self.K0, -self.Kc1, -self.Ks1, -self.Kc2, -self.Ks2]
+        if not self.absolute:
+            kmats.append(gm.J)
+        self._setup_operators(kmats, [-self.c_rho * np.eye(self.dof)],
+                              [gm.QP, gm.QS, gm.Q3, gm.wS, gm.wP])
+        self._dK = AffineStack([self.Kc1, self.Ks1, self.Kc2, self.Ks2])
+        t2 = time.perf_counter()
+        self.timings.update(global_modes=t2 - t1, build=t2 - t0)
+
+    def stiffness(self, phi: float) -> np.ndarray:
+        """K(phi) = Psi~^T A_d K_L A_d^T Psi~ (Eq. 21) from the nine constant matrices."""
+        c, s, c2, s2 = rotation_weights(phi)
+        return self.K0 + c * self.Kc1 + s * self.Ks1 + c2 * self.Kc2 + s2 * self.Ks2
+
+    def rotation(self, phi: float) -> np.ndarray:
+        """R(phi) = Psi~^T M A_d Psi~: A_d Psi~ = Psi~ R on the retained span."""
+        c, s, _, _ = rotation_weights(phi)
+        return c * self.gm.MP + s * self.gm.J + self.gm.MG3
+
+    def _weights(self, t: float) -> None:
+        phi, w, a = self.drive.state(t)
+        c, s, c2, s2 = rotation_weights(phi)
+        kw, fw = self.kstack.w, self.fw
+        kw[1], kw[2], kw[3], kw[4] = c, s, c2, s2
+        if not self.absolute:
+            kw[5] = self.c_rho * w
+        r = self.ramp(t)
+        fw[0], fw[1], fw[2] = r * c, r * s, r
+        fw[3] = -a * c + w * w * s
+        fw[4] = a * s + w * w * c
+
+    def tip(self, t: float, q: np.ndarray) -> np.ndarray:
+        """U_tip = A^T u_f,tip: the rigid rotation removed (SPEC section 2)."""
+        return rotation_z(self.drive.angle(t)).T @ (self.gm.tip @ q)
+
+    # -- reference-coordinate row and energies ---------------------------------------------------
+    def _w(self, phi: float) -> tuple[np.ndarray, np.ndarray]:
+        c, s, _, _ = rotation_weights(phi)
+        gm = self.gm
+        return c * gm.wS - s * gm.wP, -s * gm.wS - c * gm.wP
+
+    def drive_torque(self, t: float, q: np.ndarray, v: np.ndarray) -> float:
+        """Torque (N m) about z that holds the prescribed rotation (module docstring)."""
+        phi, w, a = self.drive.state(t)
+        acc = self._acc
+        self.acceleration(t, q, v, acc)
+        wv, wd = self._w(phi)
+        c, s, c2, s2 = rotation_weights(phi)
+        dK = self._dK
+        dK.w[:] = (-s, c, -2.0 * s2, 2.0 * c2)
+        dKq = np.empty(self.dof)
+        dK.apply(q, dKq)
+        tau = a * self.gm.J0 + wv @ acc + 0.5 * q @ dKq - self.ramp(t) * self.gm.s0
+        rel = 0.0 if self.absolute else 1.0
+        tau += self.c_rho * (wv @ v + rel * w * (wd @ q))
+        return float(tau)
+
+    def kinetic_energy(self, t: float, q: np.ndarray, v: np.ndarray) -> float:
+        """T = 1/2 phi'^2 J0 + phi' w(phi).xi' + 1/2 xi'.xi' (Eq. 20)."""
+        phi, w, _ = self.drive.state(t)
+        wv, _ = self._w(phi)
+        return float(0.5 * w * w * self.gm.J0 + w * wv @ v + 0.5 * v @ v)
+
+    def strain_energy(self, t: float, q: np.ndarray) -> float:
+        """V_e = xi^T K(phi) xi / 2 (Eq. 21)."""
+        return float(0.5 * q @ self.stiffness(self.drive.angle(t)) @ q)
+
+
+def build(scene: Scene, comm, options: BuildOptions) -> GCMS:
+    return GCMS(scene, comm, options)

@@ -1,0 +1,298 @@
+"""What FFRF and GCMS share: mesh integrals projected on a modal basis, once, and the small
+dense system that is then integrated, linearised and solved for its steady state.
+
+Preprocessing runs distributed on the solid model's communicator: a basis is an (n_owned, k)
+array of this rank's entries, products with the assembled PETSc matrices are distributed
+mat-vecs, and every projection X^T A Y is reduced with ``allreduce``. What comes out is a few
+dense matrices of the size of the basis, replicated on every rank; from there on the formulation
+lives on ``MPI.COMM_SELF`` and a time step costs O(k^2) and never touches the mesh.
+
+Nodal operators. On Q1 hexahedra the mass matrix is isotropic (the same scalar mass between two
+nodes for each direction), so for the 3x3 matrices B of NOTES.md (S, P, G3 = e_z e_z^T) the
+mass-coupling forms are int rho (B u) . v = M B_d, with B_d acting node by node. The inertia
+shape integrals of the paper's Appendix become (derivation in docs/reduced.md)
+
+    G = Phi^T M S_d Phi,  N = Phi^T M P_d Phi,  g = int rho Phi^T S X0,  n = int rho Phi^T P X0,
+    J0 = int rho X0^T P X0,
+
+and the GCMS constant matrices are projections of K_L and M on [P_d Phi, S_d Phi, G3_d Phi].
+
+Rotating-frame system. Both methods, written about the rotating frame at constant speed Omega
+(FFRF in its modal coordinates, GCMS in coordinates rotated back with A^T, SPEC section 6), have
+the form
+
+    z'' + (2 Omega G_r + (c/rho) I) z' + (K_r - Omega^2 N_r + a (c/rho) Omega G_r) z
+        = f_r + Omega^2 n_r,
+
+a = 1 for the absolute damping model (Eq. 67, the circulatory term) and 0 for the relative one
+(Eq. 15-16, 22-23). :class:`RotatingSystem` holds (K_r, G_r, N_r, f_r, n_r) and the tip rows;
+:class:`ReducedFormulation` derives from it the steady state, the linearisation (M, C, K) and its
+eigenvalues (growth rate, highest frequency) for both methods.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fxflex.formulation import SteadyState
+from fxflex.scene import Drive, Scene
+from fxflex.solid.model import SolidModel
+
+__all__ = ["nodal", "mat_apply", "inner", "tip_rows", "MeshData", "mesh_data",
+           "AffineStack", "RotatingSystem", "ReducedFormulation", "companion_eigenvalues",
+           "rotation_weights"]
+
+
+# -- distributed projections ----------------------------------------------------------------------
+
+def nodal(B: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """B_d X: the 3x3 matrix B applied node by node to nodal arrays X (n_owned,) or (n_owned, k)."""
+    shape = X.shape
+    Y = X.reshape(-1, 3, *shape[1:])
+    return np.einsum("ij,nj...->ni...", B, Y).reshape(shape)
+
+
+def mat_apply(A: PETSc.Mat, X: np.ndarray) -> np.ndarray:
+    """A X column by column for owned-row arrays X (n_owned, k); distributed mat-vecs."""
+    x, y = A.createVecRight(), A.createVecLeft()
+    out = np.empty_like(X)
+    for j in range(X.shape[1]):
+        x.setArray(X[:, j])
+        A.mult(x, y)
+        out[:, j] = y.getArray(readonly=True)
+    x.destroy()
+    y.destroy()
+    return out
+
+
+def inner(comm, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """X^T Y over all ranks (owned entries only, so nothing is counted twice)."""
+    return comm.allreduce(X.T @ Y)
+
+
+def tip_rows(model: SolidModel, X: np.ndarray) -> np.ndarray:
+    """(3, k): the tip-centre displacement of each column of X, on every rank."""
+    local = np.zeros((3,) + X.shape[1:])
+    if model.tip_node is not None:
+        local[:] = X[3 * model.tip_node: 3 * model.tip_node + 3]
+    return model.comm.allreduce(local)
+
+
+@dataclass
+class MeshData:
+    """Everything a reduced model takes from the mesh, as this rank's owned entries."""
+
+    K: PETSc.Mat                # K_L with the clamp (1 on the clamped diagonal)
+    M: PETSc.Mat                # M with the clamp (0 on the clamped diagonal)
+    f_c: np.ndarray             # int rho N^T P X0 (centrifugal load per unit phi'^2)
+    f_S: np.ndarray             # int rho N^T S X0 (tangential load per unit phi'')
+    F: np.ndarray               # external load in O-XYZ after the ramp (line load + tip force)
+    J0: float                   # int rho X0^T P X0: rigid moment of inertia about z
+    load_torque: float          # sum over nodes of (S X0) . F: torque of F about z, undeformed
+    timings: dict = field(default_factory=dict)
+
+
+def mesh_data(model: SolidModel) -> MeshData:
+    """Assemble K_L, M, the rigid-rotation inertia loads and the external load (once)."""
+    import ufl
+    from dolfinx import fem
+
+    from fxflex.scene.kinematics import P3, S3
+    from fxflex.solid.cms import mass_and_stiffness
+
+    t0 = time.perf_counter()
+    K, M = mass_and_stiffness(model)
+    n = model.n_owned
+    f_c = model.vector(model.centrifugal_form()).getArray(readonly=True)[:n].copy()
+    f_S = model.vector(model.euler_form()).getArray(readonly=True)[:n].copy()
+    F = model.rotating_load().getArray(readonly=True)[:n].copy()
+    X0 = model.X0
+    J0 = model.comm.allreduce(fem.assemble_scalar(fem.form(
+        model.rho * ufl.inner(ufl.dot(ufl.as_matrix(P3.tolist()), X0), X0) * model.dx)))
+    xyz = model.node_coordinates()
+    load_torque = model.comm.allreduce(float(np.sum((xyz @ S3.T) * F.reshape(-1, 3))))
+    return MeshData(K=K, M=M, f_c=f_c, f_S=f_S, F=F, J0=float(J0), load_torque=load_torque,
+                    timings={"assemble": time.perf_counter() - t0})
+
+
+# -- the small dense system ------------------------------------------------------------------------
+
+class AffineStack:
+    """y -> sum_k w[k] A_k y for fixed (n, m) matrices A_k: the A_k are stacked so that the k
+    products are one BLAS call, the weighted sum a second; nothing is allocated per call."""
+
+    def __init__(self, mats):
+        mats = [np.asarray(A, float) for A in mats]
+        self.k, self.n = len(mats), mats[0].shape[0]
+        self.A = np.ascontiguousarray(np.concatenate(mats, axis=0))
+        self.z = np.empty(self.k * self.n)
+        self.Z = self.z.reshape(self.k, self.n)
+        self.w = np.ones(self.k)
+
+    def apply(self, y: np.ndarray, out: np.ndarray) -> None:
+        if self.k == 1:
+            np.dot(self.A, y, out=out)
+            if self.w[0] != 1.0:
+                out *= self.w[0]
+        else:
+            np.dot(self.A, y, out=self.z)
+            np.dot(self.w, self.Z, out=out)
+
+
+def companion_eigenvalues(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Eigenvalues of (lambda^2 M + lambda C + K) x = 0 via the first-order companion form."""
+    n = K.shape[0]
+    MinvK = np.linalg.solve(M, K)
+    MinvC = np.linalg.solve(M, C)
+    A = np.block([[np.zeros((n, n)), np.eye(n)], [-MinvK, -MinvC]])
+    return np.linalg.eigvals(A)
+
+
+@dataclass
+class RotatingSystem:
+    """The reduced equations about the rotating frame (module docstring), in coordinates z."""
+
+    K: np.ndarray       # elastic stiffness K_r
+    G: np.ndarray       # Coriolis / S-coupling, skew
+    N: np.ndarray       # spin softening (symmetric)
+    f: np.ndarray       # external load after the ramp
+    n: np.ndarray       # centrifugal load per unit Omega^2
+    tip: np.ndarray     # (3, k): tip-centre deflection in O-XYZ per unit z
+
+
+class ReducedFormulation:
+    """Common part of FFRF and GCMS: state layout, linearisation, eigenvalues, steady state.
+
+    Subclasses set ``dof``, ``rot`` (:class:`RotatingSystem`) and the three operators of
+    ``q'' = kstack(q) + cstack(v) + F @ fw`` with their per-step weights in ``_weights(t)``.
+    """
+
+    method = ""
+    extra_columns = ("drive_torque_Nm",)
+
+    def __init__(self, scene: Scene, build_comm):
+        self.scene = scene
+        self.build_comm = build_comm
+        self.comm = MPI.COMM_SELF
+        self.drive = Drive(scene.rotation)
+        self.c_rho = scene.damping.c / scene.material.rho
+        self.absolute = scene.damping.model == "absolute"
+        self.constant_speed = scene.rotation.profile == "constant"
+        self.timings: dict[str, float] = {}
+        self._eig = None
+
+    # -- Formulation interface ---------------------------------------------------------------
+    def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Undeformed and at rest relative to the frame at t = 0 (SPEC section 1)."""
+        return np.zeros(self.dof), np.zeros(self.dof)
+
+    def constrain(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """No constrained coordinates: the clamp is built into the modes."""
+
+    def _setup_operators(self, kmats, cmats, fcols) -> None:
+        self.kstack, self.cstack = AffineStack(kmats), AffineStack(cmats)
+        self.F = np.ascontiguousarray(np.column_stack(fcols))
+        self.fw = np.zeros(self.F.shape[1])
+        self._tmp = np.empty(self.dof)
+        self._acc = np.empty(self.dof)
+
+    def acceleration(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        self._weights(t)
+        tmp = self._tmp
+        self.kstack.apply(q, out)
+        self.cstack.apply(v, tmp)
+        out += tmp
+        np.dot(self.F, self.fw, out=tmp)
+        out += tmp
+
+    def extras(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[float]:
+        return (self.drive_torque(t, q, v),)
+
+    # -- rotating frame: steady state, linearisation, eigenvalues --------------------------------
+    @property
+    def omega_s(self) -> float:
+        return self.scene.rotation.omega
+
+    def linearise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M, C, K) of the reduced equations linearised about the steady state in the rotating
+        frame: C = 2 Omega G_r + (c/rho) I (Coriolis + damping), K = K_r - Omega^2 N_r
+        (+ (c/rho) Omega G_r, the circulatory term of the absolute damping model). The reduced
+        equations are linear, so this does not depend on the steady state itself."""
+        r, w = self.rot, self.omega_s
+        eye = np.eye(self.dof)
+        C = 2.0 * w * r.G + self.c_rho * eye
+        K = r.K - w * w * r.N
+        if self.absolute:
+            K = K + self.c_rho * w * r.G
+        return eye, C, K
+
+    def eigenvalues(self) -> np.ndarray:
+        """Eigenvalues of the linearised rotating system (SPEC section 6, Eq. 59-64)."""
+        if self._eig is None:
+            self._eig = companion_eigenvalues(*self.linearise())
+        return self._eig
+
+    def growth_rate(self) -> tuple[float, float]:
+        """(Re lambda_max, |Im lambda| of that root) of the linearised rotating system."""
+        lam = self.eigenvalues()
+        i = int(np.argmax(lam.real))
+        return float(lam[i].real), float(abs(lam[i].imag))
+
+    def omega_max(self) -> float:
+        """Highest circular frequency max |lambda| of the linearised rotating system (rad/s)."""
+        return float(np.max(np.abs(self.eigenvalues())))
+
+    def stable(self, steady: SteadyState | None = None) -> bool:
+        """No eigenvalue with positive real part (beyond round-off of the eigensolver)."""
+        rate, _ = self.growth_rate()
+        return bool(rate <= 1e-9 * self.omega_max())
+
+    def steady_state(self) -> SteadyState:
+        """(K_r - Omega^2 N_r [+ (c/rho) Omega G_r]) z = f_r + Omega^2 n_r at the scene's speed
+        (the final speed of a spin-up): Eq. 59 with the time derivatives set to zero."""
+        t0 = time.perf_counter()
+        _, _, K = self.linearise()
+        r, w = self.rot, self.omega_s
+        rhs = r.f + w * w * r.n
+        z = np.linalg.solve(K, rhs)
+        res = np.linalg.norm(K @ z - rhs) / max(np.linalg.norm(rhs), 1e-300)
+        return SteadyState(tip=r.tip @ z, q=z, iterations=1, residuals=[float(res)],
+                           converged=bool(np.all(np.isfinite(z))),
+                           timings={"solve": time.perf_counter() - t0},
+                           extra={"modes": int(self.dof)})
+
+    # -- helpers for subclasses ------------------------------------------------------------------
+    def _solid_and_modes(self, count: int, model: SolidModel | None, data: MeshData | None,
+                         modes=None) -> np.ndarray:
+        """Mesh, assembled operators and ``count`` clamped modes, reusing whatever is passed;
+        returns the first ``count`` modes (n_owned, count). Collective on the build comm."""
+        from fxflex.solid.cms import clamped_modes
+
+        if modes is not None and modes.count < count:
+            raise ValueError(f"need {count} clamped modes, got {modes.count}")
+        self.model = model or SolidModel(self.scene, self.build_comm)
+        self.timings["mesh"] = self.model.timings.get("mesh", 0.0) if model is None else 0.0
+        self.data = data or mesh_data(self.model)
+        self.timings["assemble"] = self.data.timings["assemble"] if data is None else 0.0
+        t0 = time.perf_counter()
+        self.modes = modes or clamped_modes(self.model, count, K=self.data.K, M=self.data.M)
+        self.timings["eigenmodes"] = time.perf_counter() - t0
+        return self.modes.vectors[:, :count]
+
+    def _drive_state(self, t: float) -> tuple[float, float, float]:
+        return self.drive.state(t)
+
+    def ramp(self, t: float) -> float:
+        return self.scene.load.factor(t)
+
+
+def rotation_weights(phi: float) -> tuple[float, float, float, float]:
+    """(cos phi, sin phi, cos 2 phi, sin 2 phi)."""
+    c, s = math.cos(phi), math.sin(phi)
+    return c, s, c * c - s * s, 2.0 * s * c
