@@ -1,5 +1,29 @@
 """TLF: total Lagrangian solid with Green-Lagrange strain (paper Sect. 2.3, Eq. 25-35).
 
+Transient (Eq. 35), inertial frame, nodal displacements u = x - x0 (Eq. 25) as unknowns:
+
+    M u'' + Q_d + Q_k(u) = Q_e(t).
+
+- Q_k, the St.Venant-Kirchhoff internal force (Eq. 30-33), two ways on the same Gauss rule:
+  ``ufl`` assembles the residual form every evaluation (the per-step integration of Eq. 65) and
+  ``invariant`` applies the system invariant matrices K_L, K_N1, K_N2, K_N3 (Eq. 33, 35; see
+  :mod:`fxflex.solid.invariant`). Both are evaluated on the displacement seen from the hub,
+  U = A^T (x0 + u) - x0, and turned back, Q_k(u) = A Q_k(U): an identity (the Green-Lagrange strain
+  does not change under the rigid rotation A, Eq. 30) that keeps the strain, which is small, from
+  being computed as the difference of O(1) rotation terms. Measured at a 0.8 rad hub angle on the
+  default mesh, evaluating on u directly loses 3e-7 (invariant) and 3e-11 (ufl) of the force.
+- M, the mass of Eq. 29, ``consistent`` (factorised once, MUMPS) or ``lumped`` (row sums).
+- Q_d = D [A A'^T (u - u_r) + (u' - u_r')] (Eq. 34, ``relative``) with D = (c / rho) M and u_r the
+  rigid-rotation displacement (A - I) x0. Since A A'^T = -phi' S, this is D (u' - phi' S (x0 + u)):
+  the rotating-frame deformation rate, turned to o-xyz. ``absolute`` (Eq. 68): D (u' - u_r'),
+  u_r' = phi' S A x0. M^-1 D = c / rho, so damping costs no solve.
+- Q_e: the centerline line load (along z, unchanged by the rotation) and the tip force, fixed in
+  the rotating frame so A(phi) F in o-xyz, both times the load ramp.
+- Root nodes follow the drive (NOTES.md): u = (A - I) x0, u' = phi' S A x0 and
+  u'' = (phi'' S - phi'^2 P) A x0, written exactly by ``constrain`` and returned by
+  ``acceleration``; the consistent mass moves their inertia to the right-hand side (M_fr u_r'').
+- Initial state: undeformed, rigid rotation u = 0, u' = phi'(0) S x0.
+
 Steady state (SPEC section 6, NOTES.md): in the rotating frame, with U = A^T x - x0,
 
     int S(E(U)) : dE dV - Omega^2 int rho P (X0 + U) . dU dV = F . dU,
@@ -18,19 +42,26 @@ import time
 
 import numpy as np
 import ufl
-from dolfinx import fem
+from dolfinx import cpp, fem
+from petsc4py import PETSc
+from scipy.linalg.blas import daxpy
 
-from fxflex.formulation import BuildOptions, SteadyState
-from fxflex.scene import Scene
+from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
+from fxflex.scene import Drive, Scene
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel, solid_dof_count
-from fxflex.solid.petsc import newton
+from fxflex.solid.petsc import direct_solver, newton
 
-__all__ = ["TLF", "build", "dof_count", "tlf_steady"]
+__all__ = ["TLF", "UflForce", "build", "dof_count", "tlf_steady", "largest_frequency",
+           "DEFAULT_MASS"]
 
 #: highest speed reached in one Newton solve from the undeformed state (rad/s); above it the
 #: continuation raises Omega^2 in equal stages (1000 rpm default scene needs 1, 10000 rpm needs 3)
 _STAGE_OMEGA = 2 * math.pi * 6000 / 60
+
+#: mass used when --mass is not given: lumped (see docs/tlf.md, the consistent mass needs a
+#: triangular solve per step and lowers the stable CD step)
+DEFAULT_MASS = "lumped"
 
 
 def dof_count(scene: Scene) -> int:
@@ -69,23 +100,321 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
                        extra={"continuation_stages": stages})
 
 
+class UflForce:
+    """Q_k(u) by assembling the SVK residual int (F S) : grad v (Eq. 33) each evaluation.
+
+    The coefficient array of the form is packed in place from the local displacement array (one
+    gather), so an evaluation allocates nothing in Python; ``apply(u, out)`` takes and fills local
+    (owned + ghost) arrays, ghost entries holding partial sums like any assembled vector.
+    """
+
+    def __init__(self, model: SolidModel):
+        t0 = time.perf_counter()
+        self.u = fem.Function(model.V)
+        self.form = fem.form(forms.svk_residual(model.scene.material, self.u, model.u_test,
+                                                model.dx))
+        self.constants = cpp.fem.pack_constants(self.form)
+        self.coeffs = cpp.fem.pack_coefficients(self.form)
+        (self._packed,) = self.coeffs.values()          # (cells, 24), refilled in place
+        n_cells = self._packed.shape[0]
+        nodes = model.V.dofmap.list.array.reshape(-1, 8)[:n_cells]
+        self._gather = (3 * nodes[:, :, None] + np.arange(3)).reshape(-1)
+        self._flat = self._packed.reshape(-1)
+        self.build_time = time.perf_counter() - t0
+
+    def apply(self, u: np.ndarray, out: np.ndarray) -> None:
+        np.take(u, self._gather, out=self._flat)
+        out[:] = 0.0
+        cpp.fem.assemble_vector(out, self.form, self.constants, self.coeffs)
+
+    def memory_bytes(self) -> dict[str, int]:
+        """Bytes held beyond the mesh: the packed coefficient and its gather indices."""
+        return {"coefficients": self._packed.nbytes, "gather_index": self._gather.nbytes}
+
+
+def _make_force(kind: str, model: SolidModel):
+    if kind == "ufl":
+        return UflForce(model)
+    from fxflex.solid.invariant import InvariantForce
+    return InvariantForce(model)
+
+
 class TLF:
-    """The TLF formulation behind the :class:`~fxflex.formulation.Formulation` interface."""
+    """The TLF formulation behind the :class:`~fxflex.formulation.Formulation` interface.
+
+    The transient operators are built on the first call of ``initial_state`` (eagerly when the
+    options say no steady state is needed, as ``fxflex run`` does), never inside the time loop.
+    """
 
     method = "tlf"
 
-    def __init__(self, scene: Scene, comm, options: BuildOptions):
+    def __init__(self, scene: Scene, comm, options: BuildOptions, *, hub_frame: bool = True):
         t0 = time.perf_counter()
         self.scene, self.options = scene, options
         self.model = SolidModel(scene, comm)
         self.comm = comm
         self.dof = self.model.dof
-        self.force_eval = options.force_eval or "ufl"
+        self.force_eval = options.force_eval or FORCE_EVAL["tlf"][0]
+        self.mass_kind = options.mass or DEFAULT_MASS
+        self.hub_frame = hub_frame
+        self.drive = Drive(scene.rotation)
         self.timings = dict(self.model.timings)
+        self._dyn: _Dynamics | None = None
+        self._omega_max: float | None = None
+        if not options.need_steady:
+            self._dyn = _Dynamics(self)
         self.timings["build"] = time.perf_counter() - t0
 
+    @property
+    def dynamics(self) -> _Dynamics:
+        if self._dyn is None:
+            self._dyn = _Dynamics(self)
+        return self._dyn
+
+    # -- Formulation interface --------------------------------------------------------------------
     def steady_state(self) -> SteadyState:
         return tlf_steady(self.model)
+
+    def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """u = 0, u' = phi'(0) S x0: the undeformed body in rigid rotation (NOTES.md)."""
+        d = self.dynamics
+        return np.zeros(d.n), self.drive.rate(0.0) * d.Sx0
+
+    def constrain(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """Root nodes: u = (A - I) x0 = (cos phi - 1) P x0 + sin phi S x0 and
+        u' = phi' S A x0 = phi' (cos phi S x0 - sin phi P x0)."""
+        d = self.dynamics
+        phi, dphi = self.drive.angle(t), self.drive.rate(t)
+        c, s = math.cos(phi), math.sin(phi)
+        q[d.root] = d.root_combination(c - 1.0, s)
+        v[d.root] = d.root_combination(-dphi * s, dphi * c)
+
+    def acceleration(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """out = M^-1 (Q_e - Q_k(u) - Q_d) on free nodes (Eq. 35); on root nodes the prescribed
+        u_r'' = (phi'' S - phi'^2 P) A x0 = alpha P x0 + beta S x0."""
+        d = self.dynamics
+        phi, dphi, ddphi = self.drive.state(t)
+        c, s = math.cos(phi), math.sin(phi)
+        d.set_angle(c, s)
+        rhs = d.rhs
+        np.negative(self.internal_force(q), out=rhs)
+        lam = self.scene.load.factor(t)
+        _axpy(lam, d.f_line, rhs)
+        if d.f_tip:
+            F = d.A @ d.tip_force                # fixed in the rotating frame
+            for j in range(3):
+                _axpy(lam * F[j], d.f_tip[j], rhs)
+        alpha = -ddphi * s - dphi * dphi * c
+        beta = ddphi * c - dphi * dphi * s
+        if d.mass == "lumped":
+            np.multiply(rhs, d.m_inv, out=out)
+        else:
+            _axpy(-alpha, d.lift_P, rhs)        # - M_fr u_r''
+            _axpy(-beta, d.lift_S, rhs)
+            d.b_arr[:] = rhs
+            d.b_arr[d.root] = d.root_combination(alpha, beta)
+            d.ksp.solve(d.b, d.x)
+            out[:] = d.x_arr
+        if d.c_rho > 0.0:                        # M^-1 D = c / rho
+            d.damped_rate(dphi, c, s, q, v)
+            _axpy(-d.c_rho, d.y, out)
+        out[d.root] = d.root_combination(alpha, beta)
+
+    def tip(self, t: float, q: np.ndarray) -> np.ndarray:
+        """Free-end deflection in O-XYZ, U = A^T (x0 + u) - x0 of the tip centre (SPEC 2)."""
+        return self.model.tip_relative(q, self.drive.angle(t))
+
+    def omega_max(self) -> float:
+        """Highest circular frequency of the clamped body, sqrt of the largest eigenvalue of
+        K_L x = w^2 M x with the mass in use (SLEPc, computed once). Central difference is stable
+        for dt < 2 / w_max (SPEC section 4). K_L stands for the tangent: the centrifugal
+        prestress moves w_max by about sigma / E (1e-4 at 1000 rpm)."""
+        if self._omega_max is None:
+            self._omega_max = largest_frequency(self.model, self.mass_kind)
+        return self._omega_max
+
+    def memory_bytes(self) -> dict[str, int]:
+        """Bytes held by this rank for the internal force route and the mass."""
+        d = self.dynamics
+        out = {f"force_{k}": v for k, v in d.force.memory_bytes().items()}
+        if d.mass == "lumped":
+            out["mass_lumped"] = d.m_inv.nbytes
+        else:
+            F = d.ksp.getPC().getFactorMatrix()
+            out["mass_factor"] = int(F.getMumpsInfo(16) * 1e6)   # MB used by this rank's factor
+        return out
+
+    # -- pieces -----------------------------------------------------------------------------------
+    def internal_force(self, q: np.ndarray) -> np.ndarray:
+        """Q_k(u) (Eq. 33, 35) for the owned displacements q, ghosts accumulated: a view of the
+        owned part of a work array, valid until the next call. The hub angle is the one last set
+        by ``dynamics.set_angle`` (``acceleration`` sets it)."""
+        d = self.dynamics
+        n = d.n
+        d.ul[:n] = q
+        d.u_fn.x.scatter_forward()
+        if self.hub_frame:
+            np.add(d.x0l, d.ul, out=d.work)          # U = A^T (x0 + u) - x0, as rows x^T A
+            np.matmul(d.work.reshape(-1, 3), d.A, out=d.Ul.reshape(-1, 3))
+            d.Ul -= d.x0l
+            d.force.apply(d.Ul, d.fl)
+        else:
+            d.force.apply(d.ul, d.fl)
+        d.f_fn.x.scatter_reverse(cpp.la.ScatterMode.add)
+        f = d.fl[:n]
+        if self.hub_frame:                           # Q_k(u) = A Q_k(U), rows f^T A^T
+            w = d.work[:n]
+            w[:] = f
+            np.matmul(w.reshape(-1, 3), d.A.T, out=f.reshape(-1, 3))
+        return f
+
+
+class _Dynamics:
+    """Everything the time loop touches, built once: forces, mass, loads, root data, buffers."""
+
+    def __init__(self, tlf: TLF):
+        model, scene = tlf.model, tlf.scene
+        t0 = time.perf_counter()
+        V = model.V
+        n = model.n_owned
+        self.n = n
+        self.force = _make_force(tlf.force_eval, model)
+        tlf.timings["force_build"] = time.perf_counter() - t0
+        # local (owned + ghost) work functions: displacement in, force out
+        self.u_fn, self.f_fn = fem.Function(V), fem.Function(V)
+        self.ul, self.fl = self.u_fn.x.array, self.f_fn.x.array
+        self.x0l = V.tabulate_dof_coordinates().reshape(-1).copy()
+        self.Ul, self.work = np.zeros_like(self.ul), np.zeros_like(self.ul)
+        x03 = self.x0l[:n].reshape(-1, 3)
+        self.Px0 = (x03 * np.array([1.0, 1.0, 0.0])).reshape(-1)
+        self.Sx0 = np.column_stack([-x03[:, 1], x03[:, 0], np.zeros(len(x03))]).reshape(-1)
+        # loads (owned parts)
+        self.f_line = _owned(model.line_load_vector(), n)
+        self.tip_force = np.asarray(scene.load.tip_force, float)
+        self.f_tip = [_owned(b, n) for b in model.tip_traction_vectors()] \
+            if np.any(self.tip_force) else []
+        # root nodes (owned)
+        self.root = (3 * model.root_owned[:, None] + np.arange(3)).reshape(-1)
+        self.Px0_r, self.Sx0_r = self.Px0[self.root], self.Sx0[self.root]
+        self._rb, self._rb2 = np.empty(self.root.size), np.empty(self.root.size)
+        # mass (Eq. 29)
+        t1 = time.perf_counter()
+        self.mass = tlf.mass_kind
+        if self.mass == "lumped":
+            m = _owned(model.vector(_lumped_mass_form(model), zero_clamped=False), n)
+            self.m_inv = 1.0 / m
+        else:
+            Mf = model.compile(model.mass_form())
+            self.M = model.matrix(Mf)                      # root rows/cols identity
+            M_full = model.matrix(Mf, bcs=[])
+            # M_fr u_r'' = alpha M_fr (P x0)_r + beta M_fr (S x0)_r: two fixed vectors
+            self.lift_P = self._lifting(M_full, self.Px0_r)
+            self.lift_S = self._lifting(M_full, self.Sx0_r)
+            M_full.destroy()
+            self.ksp = direct_solver(self.M)
+            self.ksp.setUp()                               # factorise once, here
+            self.b, self.x = self.M.createVecs()
+            self.b_arr, self.x_arr = self.b.getArray(), self.x.getArray()
+        tlf.timings["mass_build"] = time.perf_counter() - t1
+        # damping (Eq. 34 relative, Eq. 68 absolute)
+        self.c_rho = scene.damping.c / scene.material.rho
+        self.relative = scene.damping.model == "relative"
+        # step buffers
+        self.A = np.eye(3)
+        self.rhs, self.y = np.empty(n), np.empty(n)
+
+    def _lifting(self, M_full: PETSc.Mat, root_values: np.ndarray) -> np.ndarray:
+        r, y = M_full.createVecs()
+        r.set(0.0)
+        r.getArray()[self.root] = root_values
+        M_full.mult(r, y)
+        out = y.getArray().copy()
+        out[self.root] = 0.0
+        return out
+
+    def set_angle(self, c: float, s: float) -> None:
+        A = self.A
+        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = c, -s, s, c
+
+    def root_combination(self, a: float, b: float) -> np.ndarray:
+        """a P x0 + b S x0 on the root coordinates (a work array)."""
+        np.multiply(self.Px0_r, a, out=self._rb)
+        np.multiply(self.Sx0_r, b, out=self._rb2)
+        self._rb += self._rb2
+        return self._rb
+
+    def damped_rate(self, dphi: float, c: float, s: float, q: np.ndarray, v: np.ndarray) -> None:
+        """y: the velocity the damping acts on, in o-xyz. Relative (Eq. 34):
+        u' - phi' S (x0 + u); absolute (Eq. 68): u' - u_r' = u' - phi' (cos phi S x0 -
+        sin phi P x0)."""
+        y = self.y
+        y[:] = v
+        if self.relative:
+            m = y.size // 3                           # S u = (-u_y, u_x, 0), strided
+            _axpy(dphi, q, y, n=m, offx=1, incx=3, offy=0, incy=3)
+            _axpy(-dphi, q, y, n=m, offx=0, incx=3, offy=1, incy=3)
+            _axpy(-dphi, self.Sx0, y)
+        else:
+            _axpy(-dphi * c, self.Sx0, y)
+            _axpy(dphi * s, self.Px0, y)
+
+
+def _axpy(a: float, x: np.ndarray, y: np.ndarray, **strides) -> None:
+    """y += a x in place (BLAS daxpy, no temporary); y must be contiguous float64, which is
+    checked because f2py would otherwise update a copy silently."""
+    if daxpy(x, y, a=a, **strides) is not y:
+        raise ValueError("_axpy: y must be a contiguous float64 array")
+
+
+def _owned(vec: PETSc.Vec, n: int) -> np.ndarray:
+    return vec.getArray()[:n].copy()
+
+
+def _lumped_mass_form(model: SolidModel):
+    """Row sums of the consistent mass (Eq. 29): int rho N_a, per component."""
+    ones = fem.Constant(model.mesh, np.ones(3))
+    return model.rho * ufl.inner(ones, model.u_test) * model.dx
+
+
+def largest_frequency(model: SolidModel, mass: str, *, tol: float = 1e-8) -> float:
+    """w_max = sqrt(lambda_max) of K_L x = lambda M x on the free coordinates (SLEPc).
+
+    Lumped mass: the symmetric standard problem M^-1/2 K_L M^-1/2 (Krylov-Schur, largest
+    eigenvalue). Consistent mass: the generalised Hermitian problem, with M factorised by MUMPS.
+    Clamped rows carry 1 on the diagonal of both matrices (eigenvalue 1, far below the top).
+    """
+    from slepc4py import SLEPc
+
+    K = model.matrix(model.compile(model.stiffness_form()))
+    eps = SLEPc.EPS().create(model.comm)
+    if mass == "lumped":
+        m = model.vector(_lumped_mass_form(model), zero_clamped=False)
+        with m.localForm() as ml:
+            ml.array[:] = 1.0 / np.sqrt(ml.array)
+        m.getArray()[(3 * model.root_owned[:, None] + np.arange(3)).reshape(-1)] = 1.0
+        K.diagonalScale(m, m)
+        eps.setOperators(K)
+        eps.setProblemType(SLEPc.EPS.ProblemType.HEP)
+    else:
+        M = model.matrix(model.compile(model.mass_form()))
+        eps.setOperators(K, M)
+        eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
+        st = eps.getST()
+        st.setType(SLEPc.ST.Type.SHIFT)
+        ksp = st.getKSP()
+        ksp.setType("preonly")
+        ksp.getPC().setType("cholesky")
+        ksp.getPC().setFactorSolverType("mumps")
+    eps.setType(SLEPc.EPS.Type.KRYLOVSCHUR)
+    eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
+    eps.setDimensions(nev=1, ncv=64)
+    eps.setTolerances(tol, 2000)
+    eps.solve()
+    if eps.getConverged() < 1:
+        raise RuntimeError("omega_max: SLEPc did not converge")
+    lam = eps.getEigenvalue(0).real
+    eps.destroy()
+    return math.sqrt(lam)
 
 
 def build(scene: Scene, comm, options: BuildOptions) -> TLF:
