@@ -135,9 +135,13 @@ class ANCF:
         W = _voigt_pairs(nx)                                           # (n_el, nq, 6, 14, 14)
         CBL = np.einsum("vw,eqwk->eqvk", C, BL)
         self.KLe = np.einsum("eq,eqvk,eqvl->ekl", dV, BL, CBL)
-        T1 = np.einsum("eq,eqvk,eqvcd->ekcd", dV, CBL, W)
+        T1 = np.matmul((CBL * dV[..., None, None]).reshape(n_el, -1, 2 * DPN).transpose(0, 2, 1),
+                       W.reshape(n_el, -1, (2 * SLOTS) ** 2)).reshape(n_el, 2 * DPN, 2 * SLOTS,
+                                                                    2 * SLOTS)
         Wf = W.reshape(n_el, -1, 6, (2 * SLOTS) ** 2)
-        T4 = np.einsum("eq,eqvA,vw,eqwB->eAB", dV, Wf, C, Wf).reshape((n_el,) + (2 * SLOTS,) * 4)
+        CWf = np.einsum("vw,eqwB->eqvB", C, Wf * dV[..., None, None])
+        T4 = np.matmul(Wf.reshape(n_el, -1, (2 * SLOTS) ** 2).transpose(0, 2, 1),
+                       CWf.reshape(n_el, -1, (2 * SLOTS) ** 2)).reshape((n_el,) + (2 * SLOTS,) * 4)
         emap = np.arange(2 * DPN).reshape(2 * SLOTS, 3)
         self.engine = GramChain(T1, T4, dpn=DPN, spn=SLOTS, emap=emap, esign=np.ones(emap.shape))
         self.quad = {"nx": nx, "dV": dV}                               # for checks

@@ -44,6 +44,44 @@ def _csr(rows, cols, vals, shape) -> sp.csr_matrix:
     return m
 
 
+class ChainBlocks:
+    """A system matrix of a chain whose row group k (r rows) couples only the column groups
+    k - 1, k, k + 1 (c columns each), stored as one dense block row per group so that y = A x is
+    a single batched product over overlapping windows of x (no per-step assembly)."""
+
+    def __init__(self, A: sp.csr_matrix, r: int, c: int, n_groups: int):
+        dense = np.zeros((n_groups * r, n_groups * c))
+        dense[:A.shape[0], :A.shape[1]] = A.toarray()
+        self.blocks = np.zeros((n_groups, r, 3 * c))
+        padded = np.zeros((n_groups * r, (n_groups + 2) * c))
+        padded[:, c:-c] = dense
+        for k in range(n_groups):
+            self.blocks[k] = padded[k * r:(k + 1) * r, k * c:(k + 3) * c]
+        if not np.isclose(np.abs(self.blocks).sum(), np.abs(dense).sum(), rtol=1e-12, atol=0):
+            raise ValueError("matrix couples groups that are not neighbours")
+        # trailing columns that no block uses (e.g. the pairs of node k + 1 with node k + 2)
+        used = np.nonzero(np.any(self.blocks != 0.0, axis=(0, 1)))[0]
+        width = int(used[-1]) + 1 if used.size else 1
+        self.blocks = np.ascontiguousarray(self.blocks[:, :, :width])
+        self.shape, self.c, self.n_groups = A.shape, c, n_groups
+        self.xpad = np.zeros((n_groups + 2) * c)
+        self.windows = as_strided(self.xpad, shape=(n_groups, width, 1),
+                                  strides=(c * 8, 8, 8), writeable=False)
+
+    def matvec(self, x: np.ndarray, y: np.ndarray) -> None:
+        """y = A x (y of length n_groups r, overwritten)."""
+        self.xpad[self.c:self.c + x.size] = x
+        np.matmul(self.blocks, self.windows, out=y.reshape(self.n_groups, -1, 1))
+
+    def toarray(self) -> np.ndarray:   # pragma: no cover - inspection
+        r = self.blocks.shape[1]
+        out = np.zeros((self.n_groups * r, (self.n_groups + 3) * self.c))
+        width = self.blocks.shape[2]
+        for k in range(self.n_groups):
+            out[k * r:(k + 1) * r, k * self.c:k * self.c + width] = self.blocks[k]
+        return out[:, self.c:-2 * self.c]
+
+
 def _matvec(m: sp.csr_matrix, x: np.ndarray, y: np.ndarray) -> None:
     """y += m x without allocating (scipy's compiled kernel)."""
     _sparsetools.csr_matvec(m.shape[0], m.shape[1], m.indptr, m.indices, m.data, x, y)
@@ -82,15 +120,28 @@ class GramChain:
     # ------------------------------------------------------------------ system invariant route
     def _build_system(self) -> None:
         ms, spn, dpn = self.ms, self.spn, self.dpn
+        n_nodes = self.n_el + 1
+        # pairs of slots sharing an element, grouped by node: group k = the pairs within node k,
+        # then the pairs (node k, node k + 1); element e's pairs are then contiguous and every
+        # system matrix below couples only neighbouring groups
         index: dict[tuple[int, int], int] = {}
+        for k in range(n_nodes):
+            for s in range(spn):
+                for t in range(s, spn):
+                    index[(spn * k + s, spn * k + t)] = len(index)
+            if k < self.n_el:
+                for s in range(spn):
+                    for t in range(spn):
+                        index[(spn * k + s, spn * (k + 1) + t)] = len(index)
+        self.group = spn * (spn + 1) // 2 + spn * spn
         epairs = np.zeros((self.n_el, ms, ms), dtype=np.int64)
         for e in range(self.n_el):
             for s in range(ms):
                 for t in range(s, ms):
-                    key = (spn * e + s, spn * e + t)
-                    epairs[e, s, t] = epairs[e, t, s] = index.setdefault(key, len(index))
-        pairs = np.array(sorted(index, key=index.get), dtype=np.int64)
+                    epairs[e, s, t] = epairs[e, t, s] = index[(spn * e + s, spn * e + t)]
+        pairs = np.array(list(index), dtype=np.int64)
         self.n_pairs = len(pairs)
+        n_pad = self.group * n_nodes
         self.I, self.J = pairs[:, 0].copy(), pairs[:, 1].copy()
         iu, ju = np.triu_indices(ms)
         off = iu != ju
@@ -108,9 +159,13 @@ class GramChain:
             r4.append(np.repeat(pe, len(pe))), c4.append(np.tile(pe, len(pe)))
             v4.append(0.5 * w4.ravel())
         cat = np.concatenate
-        self.K1h = _csr(cat(r1), cat(c1), cat(v1), (self.n_dof, self.n_pairs))   # K_N1 = T1/2
-        self.K2 = _csr(cat(r2), cat(c2), cat(v2), (self.n_pairs, self.n_dof))    # K_N2 = T1^T
-        self.K3h = _csr(cat(r4), cat(c4), cat(v4), (self.n_pairs, self.n_pairs))  # K_N3 = T4/2
+        K1h = _csr(cat(r1), cat(c1), cat(v1), (self.n_dof, n_pad))       # K_N1 = T1 / 2
+        K2 = _csr(cat(r2), cat(c2), cat(v2), (n_pad, self.n_dof))        # K_N2 = T1^T
+        K3h = _csr(cat(r4), cat(c4), cat(v4), (n_pad, n_pad))            # K_N3 = T4 / 2
+        self.K1h = ChainBlocks(K1h, dpn, self.group, n_nodes)
+        self.K2 = ChainBlocks(K2, self.group, dpn, n_nodes)
+        self.K3h = ChainBlocks(K3h, self.group, self.group, n_nodes)
+        self.K_sparse = {"K_N1": K1h, "K_N2": K2, "K_N3": K3h}
         # symmetric slot matrix S (both triangles) whose entries are read from the pair vector
         rows = np.concatenate([self.I, self.J[self.I != self.J]])
         cols = np.concatenate([self.J, self.I[self.I != self.J]])
@@ -132,8 +187,10 @@ class GramChain:
         self.B = np.zeros((self.n_slots, self.nc))
         self.BI = np.zeros((self.n_pairs, self.nc))
         self.BJ = np.zeros((self.n_pairs, self.nc))
-        self.p = np.zeros(self.n_pairs)
-        self.s = np.zeros(self.n_pairs)
+        self.p = np.zeros(n_pad)
+        self.s = np.zeros(n_pad)
+        self.s3 = np.zeros(n_pad)
+        self.q1 = np.zeros(self.n_dof)
         self.SB = np.zeros((self.n_slots, self.nc))
         self.tmp = np.zeros(self.n_dof)
 
@@ -150,12 +207,12 @@ class GramChain:
         B = self.slots(u)
         np.take(B, self.I, axis=0, out=self.BI)
         np.take(B, self.J, axis=0, out=self.BJ)
-        np.multiply(self.BI, self.BJ, out=self.BI)
-        np.sum(self.BI, axis=1, out=self.p)                     # p = u_d u (pair products)
-        self.s.fill(0.0)
-        _matvec(self.K2, u, self.s)                              # S1 on the pairs
-        _matvec(self.K3h, self.p, self.s)                        # + S4 / 2
-        _matvec(self.K1h, self.p, out)                           # K_N1 u_d u
+        np.einsum("ij,ij->i", self.BI, self.BJ, out=self.p[:self.n_pairs])   # p = u_d u
+        self.K2.matvec(u, self.s)                                # S1 on the pairs
+        self.K3h.matvec(self.p, self.s3)                         # S4 / 2
+        self.s += self.s3
+        self.K1h.matvec(self.p, self.q1)                         # K_N1 u_d u
+        out += self.q1
         np.take(self.s, self.smap, out=self.S.data)
         S = self.S
         if self.identity_slots:
