@@ -183,6 +183,8 @@ class ANCF:
         self._u, self._F, self._Ku, self._d, self._Md = (np.zeros(n) for _ in range(5))
         self._Ae0 = np.zeros((self.n_slots, 3))
         self._acon = np.zeros((len(self.con), 3))
+        self._Ae0c = np.zeros((len(self.con), 3))
+        self._mfa = np.zeros((len(self.free), 3))
         self._rhs = np.zeros((len(self.free), 3))
         self._afree = np.zeros((len(self.free), 3))
         self._col = np.zeros(self.n_slots)
@@ -264,13 +266,15 @@ class ANCF:
         K = self._Kacc
         np.multiply(S3, accel, out=K)
         K -= (rate * rate) * P3
-        np.matmul(self._Ae0[self.con], K.T, out=self._acon)
+        np.take(self._Ae0, self.con, axis=0, out=self._Ae0c, mode="clip")
+        np.matmul(self._Ae0c, K.T, out=self._acon)
         F3, out3 = F.reshape(-1, 3), out.reshape(-1, 3)
         nr = len(self.root_free)
         rhs = self._rhs
-        rhs[:nr] = F3[self.root_free]
+        np.take(F3, self.root_free, axis=0, out=rhs[:nr], mode="clip")
         rhs[nr:] = F3[SLOTS:]
-        rhs -= self.Mfc @ self._acon
+        np.matmul(self.Mfc, self._acon, out=self._mfa)
+        rhs -= self._mfa
         np.matmul(self.Minv, rhs, out=self._afree)
         out3[self.con] = self._acon
         out3[self.root_free] = self._afree[:nr]

@@ -198,22 +198,22 @@ class GramChain:
         """The slot matrix B = R u (a view of u when possible)."""
         if self.identity_slots:
             return u.reshape(self.n_slots, self.nc)
-        np.take(u, self.gmap, out=self.B.reshape(-1))
+        np.take(u, self.gmap, out=self.B.reshape(-1), mode="clip")
         self.B.reshape(-1)[:] *= self.gsign
         return self.B
 
     def add_force_system(self, u: np.ndarray, out: np.ndarray) -> None:
         """out += K_N(u) u with the system invariant matrices (no element loop)."""
         B = self.slots(u)
-        np.take(B, self.I, axis=0, out=self.BI)
-        np.take(B, self.J, axis=0, out=self.BJ)
+        np.take(B, self.I, axis=0, out=self.BI, mode="clip")
+        np.take(B, self.J, axis=0, out=self.BJ, mode="clip")
         np.einsum("ij,ij->i", self.BI, self.BJ, out=self.p[:self.n_pairs])   # p = u_d u
         self.K2.matvec(u, self.s)                                # S1 on the pairs
         self.K3h.matvec(self.p, self.s3)                         # S4 / 2
         self.s += self.s3
         self.K1h.matvec(self.p, self.q1)                         # K_N1 u_d u
         out += self.q1
-        np.take(self.s, self.smap, out=self.S.data)
+        np.take(self.s, self.smap, out=self.S.data, mode="clip")
         S = self.S
         if self.identity_slots:
             _sparsetools.csr_matvecs(S.shape[0], S.shape[1], self.nc, S.indptr, S.indices, S.data,
@@ -250,7 +250,7 @@ class GramChain:
         n, ms, nc, ne = self.n_el, self.ms, self.nc, self.ne
         ue = self.element_views(u)
         B = self.eB
-        np.take(ue, self.emap.ravel(), axis=1, out=B.reshape(n, ms * nc))
+        np.take(ue, self.emap.ravel(), axis=1, out=B.reshape(n, ms * nc), mode="clip")
         B *= self.esign
         # X[e, k, q, i] = sum_p T1[e, k, p, q] B[e, p, i]
         np.matmul(self.T1e.reshape(n, ne * ms, ms), B, out=self.eX)
