@@ -29,7 +29,14 @@ def test_steady_json(capsys, method):
 
 @pytest.mark.parametrize("method,extra", [("lebb", []), ("nebb", ["--force-eval", "element"]),
                                           ("ancf", ["--force-eval", "element"]),
-                                          ("ancf", ["--damping-model", "absolute"])])
+                                          ("ancf", ["--damping-model", "absolute"]),
+                                          ("nebb", ["--set", "rotation.profile=spin-up",
+                                                    "--set", "rotation.spinup_time=1e-3",
+                                                    "--set", "geometry.hub_radius=0.3"]),
+                                          ("ancf", ["--set", "rotation.profile=spin-up",
+                                                    "--set", "rotation.spinup_time=1e-3",
+                                                    "--set", "load.tip_force=[0,100,-50]",
+                                                    "--set", "section.torsion=saint-venant"])])
 def test_run_writes_csv(capsys, tmp_path, method, extra):
     out = tmp_path / "series.csv"
     d = run_json(capsys, "run", "--method", method, "--t-end", "2e-5", "--out", str(out),
