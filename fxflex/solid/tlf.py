@@ -48,11 +48,12 @@ from scipy.linalg.blas import daxpy
 
 from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
 from fxflex.scene import Drive, Scene
+from fxflex.scene.kinematics import rotation_z
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel, solid_dof_count
 from fxflex.solid.petsc import direct_solver, newton
 
-__all__ = ["TLF", "UflForce", "build", "dof_count", "tlf_steady", "largest_frequency",
+__all__ = ["TLF", "UflForce", "FieldWriter", "build", "dof_count", "tlf_steady", "largest_frequency",
            "DEFAULT_MASS"]
 
 #: highest speed reached in one Newton solve from the undeformed state (rad/s); above it the
@@ -244,6 +245,19 @@ class TLF:
             out["mass_factor"] = int(F.getMumpsInfo(16) * 1e6)   # MB used by this rank's factor
         return out
 
+    def field_writer(self, path: str) -> "FieldWriter":
+        """``--fields``: an XDMF series of the displacement for ParaView (rank-collective)."""
+        return FieldWriter(self, path)
+
+    def tangent(self, q: np.ndarray) -> PETSc.Mat:
+        """The tangent stiffness dQ_k/du at the owned displacements q (o-xyz, no constraints):
+        ``ufl.derivative`` of the SVK residual (Eq. 33), assembled."""
+        u = fem.Function(self.model.V)
+        u.x.array[: q.size] = q
+        u.x.scatter_forward()
+        R = forms.svk_residual(self.scene.material, u, self.model.u_test, self.model.dx)
+        return self.model.matrix(ufl.derivative(R, u, self.model.u_trial), bcs=[])
+
     # -- pieces -----------------------------------------------------------------------------------
     def internal_force(self, q: np.ndarray) -> np.ndarray:
         """Q_k(u) (Eq. 33, 35) for the owned displacements q, ghosts accumulated: a view of the
@@ -267,6 +281,33 @@ class TLF:
             w[:] = f
             np.matmul(w.reshape(-1, 3), d.A.T, out=f.reshape(-1, 3))
         return f
+
+
+class FieldWriter:
+    """Writes u (o-xyz) and the hub-frame displacement U = A^T (x0 + u) - x0 at each call, to
+    one XDMF/HDF5 pair. Every rank must call ``write`` and ``close``."""
+
+    def __init__(self, tlf: TLF, path: str):
+        from dolfinx.io import XDMFFile
+
+        m = tlf.model
+        self.drive = tlf.drive
+        self.file = XDMFFile(tlf.comm, path, "w")
+        self.file.write_mesh(m.mesh)
+        self.u, self.U = fem.Function(m.V, name="u"), fem.Function(m.V, name="U_hub")
+        self.x0 = m.node_coordinates()
+
+    def write(self, t: float, q: np.ndarray) -> None:
+        n = q.size
+        self.u.x.array[:n] = q
+        A = rotation_z(self.drive.angle(t))
+        self.U.x.array[:n] = ((self.x0 + q.reshape(-1, 3)) @ A - self.x0).reshape(-1)
+        for f in (self.u, self.U):
+            f.x.scatter_forward()
+            self.file.write_function(f, t)
+
+    def close(self) -> None:
+        self.file.close()
 
 
 class _Dynamics:
