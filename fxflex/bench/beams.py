@@ -44,10 +44,12 @@ def time_steps(scene: Scene, method: str, force_eval: str | None, integrator: st
     t0 = time.perf_counter()
     form = build(method, scene, None, BuildOptions(force_eval=force_eval, need_steady=False))
     pre = time.perf_counter() - t0
+    cpu0 = time.process_time()
     res = simulate(form, integrator, dt, steps * dt, sample_every=steps)
+    cpu = time.process_time() - cpu0
     return {"method": method, "force_eval": force_eval, "integrator": integrator, "dt_s": dt,
             "n_el": scene.mesh.beam_elements, "dof": form.dof, "preprocess_s": pre,
-            "steps": res.steps, "solve_s": res.wall_s, "us_per_step": 1e6 * res.wall_s / res.steps,
+            "steps": res.steps, "solve_s": res.wall_s, "cpu_s": cpu, "us_per_step": 1e6 * res.wall_s / res.steps,
             "diverged": res.diverged is not None}
 
 
@@ -132,19 +134,21 @@ def run(scene: Scene, out_dir: str, comm, quick: bool = False) -> dict:
                        "met": [abs(d) <= a for d, a in zip(diff, allowed)]})
 
     md = ["# Beam formulations: benchmark", "",
-          f"{'quick smoke run; ' if quick else ''}{os.cpu_count()} cores; "
+          f"{'quick smoke run; ' if quick else ''}{os.cpu_count()} cores, load average "
+          f"{os.getloadavg()[0]:.2f} at the start; "
           f"1 step = one explicit step with the paper's integrator; tip sampled every 100 steps.",
           "", f"## Speed on the default scene ({steps} steps, paper's step)", "",
           _md([[r["method"], r["force_eval"] or "-", r["integrator"], f"{r['dt_s']:.2g}",
                 r["dof"], f"{r['preprocess_s']:.3f}", f"{r['solve_s']:.3f}",
-                f"{r['us_per_step']:.1f}"] for r in speed],
+                f"{r['cpu_s']:.3f}", f"{r['us_per_step']:.1f}"] for r in speed],
               ["method", "force eval", "integrator", "dt (s)", "dof", "preprocess (s)",
-               f"{steps} steps (s)", "us/step"]),
+               f"{steps} steps (s)", "CPU (s)", "us/step"]),
           "", f"## Paper Tables 5 and 6: invariant vs element ({steps} steps, dt = 0.02 us)", "",
           _md([[r["method"], r["integrator"], r["n_el"], r["dof"], r["force_eval"],
-                f"{r['preprocess_s']:.3f}", f"{r['solve_s']:.3f}"] for r in tables56],
+                f"{r['preprocess_s']:.3f}", f"{r['solve_s']:.3f}", f"{r['cpu_s']:.3f}"]
+               for r in tables56],
               ["method", "integrator", "elements", "dof", "force eval", "preprocess (s)",
-               f"{steps} steps (s)"]),
+               f"{steps} steps (s)", "CPU (s)"]),
           "", "## Closed-form checks (uniform untwisted beam, 10 elements)", "",
           _md([[r["case"], r["method"], f"{r['value_mm']:.6g}", f"{r['reference_mm']:.6g}",
                 f"{r['error_pct']:+.3f}"] for r in checks],
@@ -173,7 +177,8 @@ def run(scene: Scene, out_dir: str, comm, quick: bool = False) -> dict:
             json.dump(result, fh, indent=1, default=float)
     lines = [f"bench beams: {os.path.join(out_dir, 'beams.md')}"]
     lines += [f"  {r['method']:4s} {r['force_eval'] or '':9s} {r['integrator']} {steps} steps "
-              f"{r['solve_s']:.2f} s (preprocess {r['preprocess_s']:.2f} s)" for r in speed]
+              f"{r['solve_s']:.2f} s wall, {r['cpu_s']:.2f} s CPU (preprocess "
+              f"{r['preprocess_s']:.2f} s)" for r in speed]
     lines += [f"  {r['pair']}: " + ", ".join(f"{c} {d:+.2f} %" for c, d in
                                               zip(COMPONENTS, r["diff_pct"])) for r in ratios]
     result["summary"] = "\n".join(lines)
