@@ -73,14 +73,6 @@ class ChainBlocks:
         self.xpad[self.c:self.c + x.size] = x
         np.matmul(self.blocks, self.windows, out=y.reshape(self.n_groups, -1, 1))
 
-    def toarray(self) -> np.ndarray:   # pragma: no cover - inspection
-        r = self.blocks.shape[1]
-        out = np.zeros((self.n_groups * r, (self.n_groups + 3) * self.c))
-        width = self.blocks.shape[2]
-        for k in range(self.n_groups):
-            out[k * r:(k + 1) * r, k * self.c:k * self.c + width] = self.blocks[k]
-        return out[:, self.c:-2 * self.c]
-
 
 def _matvec(m: sp.csr_matrix, x: np.ndarray, y: np.ndarray) -> None:
     """y += m x without allocating (scipy's compiled kernel)."""
@@ -165,7 +157,6 @@ class GramChain:
         self.K1h = ChainBlocks(K1h, dpn, self.group, n_nodes)
         self.K2 = ChainBlocks(K2, self.group, dpn, n_nodes)
         self.K3h = ChainBlocks(K3h, self.group, self.group, n_nodes)
-        self.K_sparse = {"K_N1": K1h, "K_N2": K2, "K_N3": K3h}
         # symmetric slot matrix S (both triangles) whose entries are read from the pair vector
         rows = np.concatenate([self.I, self.J[self.I != self.J]])
         cols = np.concatenate([self.J, self.I[self.I != self.J]])
