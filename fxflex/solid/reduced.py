@@ -40,13 +40,14 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fxflex.beam.linear import companion_eigenvalues
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
 from fxflex.solid.model import SolidModel
 
 __all__ = ["nodal", "mat_apply", "inner", "tip_rows", "MeshData", "mesh_data",
-           "AffineStack", "RotatingSystem", "ReducedFormulation", "companion_eigenvalues",
-           "rotation_weights"]
+           "AffineStack", "RotatingSystem", "ReducedFormulation", "rotation_weights",
+           "ab2_root"]
 
 
 # -- distributed projections ----------------------------------------------------------------------
@@ -145,15 +146,6 @@ class AffineStack:
             np.dot(self.w, self.Z, out=out)
 
 
-def companion_eigenvalues(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Eigenvalues of (lambda^2 M + lambda C + K) x = 0 via the first-order companion form."""
-    n = K.shape[0]
-    MinvK = np.linalg.solve(M, K)
-    MinvC = np.linalg.solve(M, C)
-    A = np.block([[np.zeros((n, n)), np.eye(n)], [-MinvK, -MinvC]])
-    return np.linalg.eigvals(A)
-
-
 @dataclass
 class RotatingSystem:
     """The reduced equations about the rotating frame (module docstring), in coordinates z."""
@@ -248,6 +240,17 @@ class ReducedFormulation:
         """Highest circular frequency max |lambda| of the linearised rotating system (rad/s)."""
         return float(np.max(np.abs(self.eigenvalues())))
 
+    def ab2_growth_rate(self, dt: float) -> tuple[float, float]:
+        """(ln|z| / dt, |lambda|) of the fastest-growing AB2 solution at step dt: z the larger root
+        of z^2 - (1 + 3/2 dt lambda) z + 1/2 dt lambda = 0 for each eigenvalue lambda of the
+        linearised rotating system. Exact for the constant-speed FFRF (a linear constant-
+        coefficient system). For small dt |lambda| and lambda near the imaginary axis it tends to
+        Re lambda + |lambda|^4 dt^3 / 4, the law of NOTES.md."""
+        lam = self.eigenvalues()
+        rate = np.log(ab2_root(dt * lam)) / dt
+        i = int(np.argmax(rate))
+        return float(rate[i]), float(abs(lam[i]))
+
     def stable(self, steady: SteadyState | None = None) -> bool:
         """No eigenvalue with positive real part (beyond round-off of the eigensolver)."""
         rate, _ = self.growth_rate()
@@ -290,6 +293,13 @@ class ReducedFormulation:
 
     def ramp(self, t: float) -> float:
         return self.scene.load.factor(t)
+
+
+def ab2_root(h_lambda: np.ndarray) -> np.ndarray:
+    """|z| of the principal (larger) root of AB2's characteristic equation for y' = lambda y."""
+    b = 1.0 + 1.5 * h_lambda
+    d = np.sqrt(b * b - 2.0 * h_lambda + 0j)
+    return np.maximum(np.abs(0.5 * (b + d)), np.abs(0.5 * (b - d)))
 
 
 def rotation_weights(phi: float) -> tuple[float, float, float, float]:
