@@ -180,6 +180,10 @@ class InvariantForce:
         self._ua, self._ub = np.empty((P, 3)), np.empty((P, 3))
         self._w, self._hw, self._z = np.empty(P), np.empty(P), np.empty(P)
         self._y = np.empty((2, P, 3))
+        # (numpy 1.24 buffers a broadcast multiply into ``out``; per-column views do not)
+        self._columns = [(x[:, j], y[:, j]) for x, y in ((self._ub, self._y[0]),
+                                                         (self._ua, self._y[1]))
+                         for j in range(3)]
         self._uv, self._fv = _vec(self._u), _vec(self._f)
         self._wv, self._hwv, self._zv = _vec(self._w), _vec(self._hw), _vec(self._z)
         self._yv = _vec(self._y.reshape(-1))
@@ -188,8 +192,8 @@ class InvariantForce:
     def pair_products(self, u: np.ndarray, out: np.ndarray) -> None:
         """w_p = u_a . u_b for every pair (the paper's u_ds u, Eq. 31)."""
         u3 = u.reshape(-1, 3)
-        np.take(u3, self.pa, axis=0, out=self._ua)
-        np.take(u3, self.pb, axis=0, out=self._ub)
+        np.take(u3, self.pa, axis=0, out=self._ua, mode="clip")   # "raise" buffers
+        np.take(u3, self.pb, axis=0, out=self._ub, mode="clip")
         np.einsum("pi,pi->p", self._ua, self._ub, out=out)
 
     def apply(self, u: np.ndarray, out: np.ndarray) -> None:
@@ -201,8 +205,8 @@ class InvariantForce:
         self.KN2.multTransposeAdd(self._hwv, self._fv, self._fv)   # + K_N1 w
         self.KN2.mult(self._uv, self._zv)                      # z = K_N2 u
         self.KN3.multAdd(self._wv, self._zv, self._zv)         #   + K_N3 w
-        np.multiply(self._ub, self._z[:, None], out=self._y[0])
-        np.multiply(self._ua, self._z[:, None], out=self._y[1])
+        for src, dst in self._columns:                        # y = z u_b, z u_a per component
+            np.multiply(src, self._z, out=dst)
         self.R.multAdd(self._yv, self._fv, self._fv)           # + u_ds^T z
         out[:] = self._f
 

@@ -124,7 +124,7 @@ class UflForce:
         self.build_time = time.perf_counter() - t0
 
     def apply(self, u: np.ndarray, out: np.ndarray) -> None:
-        np.take(u, self._gather, out=self._flat)
+        np.take(u, self._gather, out=self._flat, mode="clip")   # "raise" buffers out
         out[:] = 0.0
         cpp.fem.assemble_vector(out, self.form, self.constants, self.coeffs)
 
@@ -202,9 +202,9 @@ class TLF:
         lam = self.scene.load.factor(t)
         _axpy(lam, d.f_line, rhs)
         if d.f_tip:
-            F = d.A @ d.tip_force                # fixed in the rotating frame
+            np.dot(d.A, d.tip_force, out=d.tip_now)  # fixed in the rotating frame: A F
             for j in range(3):
-                _axpy(lam * F[j], d.f_tip[j], rhs)
+                _axpy(lam * d.tip_now[j], d.f_tip[j], rhs)
         alpha = -ddphi * s - dphi * dphi * c
         beta = ddphi * c - dphi * dphi * s
         if d.mass == "lumped":
@@ -332,6 +332,7 @@ class _Dynamics:
         # loads (owned parts)
         self.f_line = _owned(model.line_load_vector(), n)
         self.tip_force = np.asarray(scene.load.tip_force, float)
+        self.tip_now = np.empty(3)
         self.f_tip = [_owned(b, n) for b in model.tip_traction_vectors()] \
             if np.any(self.tip_force) else []
         # root nodes (owned)
