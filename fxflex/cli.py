@@ -307,8 +307,14 @@ COMMANDS = {"info": cmd_info, "steady": cmd_steady, "run": cmd_run, "bench": cmd
 
 
 def _quiet_logs() -> None:
-    logging.basicConfig(level=logging.WARNING, stream=sys.stderr,
-                        format="fxflex: %(levelname)s: %(message)s")
+    """Warnings and errors only on stderr: FFCx's JIT and its C compiler log at INFO through
+    loggers that set their own level, so the handler itself filters."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setLevel(logging.WARNING)
+    handler.setFormatter(logging.Formatter("fxflex: %(levelname)s: %(message)s"))
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(logging.WARNING)
     for name in ("ffcx", "UFL", "ufl", "dolfinx", "FFCX"):
         logging.getLogger(name).setLevel(logging.WARNING)
 

@@ -1,0 +1,93 @@
+"""What every benchmark needs: the machine, child runs of the CLI on N ranks, Markdown tables."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+
+from fxflex.scene import Scene
+
+__all__ = ["machine", "scene_overrides", "child_env", "run_cli", "markdown_table", "Timer"]
+
+
+def machine() -> dict:
+    """CPU model, core count and memory, for the header of every benchmark table."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    mem = None
+    try:
+        with open("/proc/meminfo") as fh:
+            mem = round(int(fh.readline().split()[1]) / 2**20, 1)
+    except OSError:
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "memory_gib": mem,
+            "python": platform.python_version(), "date": time.strftime("%Y-%m-%d %H:%M")}
+
+
+def scene_overrides(scene: Scene) -> list[str]:
+    """``--set`` arguments that reproduce ``scene`` exactly in a child process."""
+    out = []
+    for sec, table in scene.to_dict().items():
+        for key, value in table.items():
+            out += ["--set", f"{sec}.{key}={json.dumps(value)}"]
+    return out
+
+
+def child_env() -> dict:
+    """Environment for a child (mpirun) process: without the variables of this process's own
+    MPI singleton, which would make the child believe it runs inside this job."""
+    keep = ("OMPI_ALLOW_RUN_AS_ROOT", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM",
+            "OMPI_MCA_rmaps_base_oversubscribe")
+    env = {k: v for k, v in os.environ.items()
+           if not (k.startswith(("OMPI_", "PMIX_", "PRTE_", "OPAL_")) and k not in keep)}
+    env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+               OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    return env
+
+
+def run_cli(args: list[str], scene: Scene, ranks: int = 1, timeout: float = 3600) -> dict:
+    """Run ``fxflex ARGS --json`` for ``scene`` on ``ranks`` ranks; its JSON plus ``wall_s``
+    (whole process) or ``{"error": last stderr line}``."""
+    cmd = [sys.executable, "-m", "fxflex", *args, "--json", *scene_overrides(scene)]
+    if ranks > 1:
+        cmd = ["mpirun", "-n", str(ranks), "--bind-to", "core"] + cmd
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=timeout)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        return {"error": (proc.stderr.strip().splitlines() or ["no output"])[-1], "wall_s": wall}
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    out["wall_s"] = wall
+    return out
+
+
+def markdown_table(header: list[str], rows: list[list]) -> str:
+    def cell(x):
+        if isinstance(x, float):
+            return f"{x:.4g}"
+        return str(x)
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(cell(x) for x in row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+class Timer:
+    """``with Timer() as t: ...; t.s`` -- elapsed seconds."""
+
+    def __enter__(self):
+        self.t0 = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc):
+        self.s = time.perf_counter() - self.t0
