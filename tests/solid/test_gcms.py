@@ -157,6 +157,8 @@ def test_ffrf_and_gcms_agree_over_5_ms_default_mesh():
 @pytest.mark.mpi
 def test_reduced_models_on_two_ranks_equal_serial():
     """Distributed preprocessing, replicated reduced system: same numbers as a COMM_SELF build."""
+    if MPI.COMM_WORLD.size < 2:
+        pytest.skip("needs mpirun -n 2")
     s = load_scene(overrides=["mesh.solid=[20,4,2]"])
     par = [FFRF(s, COMM), GCMS(s, COMM)]
     ser = [FFRF(s, MPI.COMM_SELF), GCMS(s, MPI.COMM_SELF)]
@@ -168,3 +170,21 @@ def test_reduced_models_on_two_ranks_equal_serial():
     assert np.allclose(par[0].inv.G, ser[0].inv.G, rtol=0, atol=1e-8)
     lam = ser[0].inv.Lambda
     assert np.allclose(par[0].inv.Lambda, lam, rtol=0, atol=1e-12 * np.abs(lam).max())
+
+
+@pytest.mark.serial
+def test_bench_quick_runs(tmp_path):
+    """``fxflex bench reduced --quick``: every study runs and the report is written."""
+    import json
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "fxflex", "bench", "reduced", "--quick", "--json",
+                        "--out", str(tmp_path)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["quick"] is True and [s["method"] for s in d["speed"]] == ["ffrf", "gcms"]
+    assert all(x["cause"] == "physical" for x in d["divergence"])
+    assert max(d["ffrf_vs_gcms"]["max_diff_over_peak"][:3]) < 5e-3
+    report = (tmp_path / "reduced" / "reduced.md").read_text()
+    assert "Gram cut" in report and "step-size study" in report
