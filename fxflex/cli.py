@@ -65,6 +65,15 @@ def _method(text):
     return text
 
 
+def _method_list(text):
+    methods = [m.strip() for m in text.split(",") if m.strip()]
+    bad = [m for m in methods if m not in METHODS]
+    if bad or not methods:
+        raise argparse.ArgumentTypeError(f"{','.join(bad) or text!r} not a method; allowed: "
+                                         f"{','.join(METHODS)}")
+    return methods
+
+
 def _common(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("scene")
     g.add_argument("--scene", metavar="FILE.toml", help="scene file (SPEC section 8)")
@@ -119,6 +128,14 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--sample-dt", type=_positive("--sample-dt"), metavar="DT",
                    help="output interval (s); default max(dt, t_end/20000)")
     _common(p)
+    p = sub.add_parser("compare", help="the paper's comparison: every method at the three "
+                                       "paper speeds, next to the paper's figures")
+    p.add_argument("--methods", type=_method_list, default=list(METHODS), metavar="M,...",
+                   help="comma-separated subset of " + ",".join(METHODS))
+    p.add_argument("--out", metavar="DIR", default="out/compare",
+                   help="output folder (default out/compare)")
+    _common(p)
+
     p = sub.add_parser("bench", help="benchmarks; tables written to --out")
     p.add_argument("name", choices=BENCHES, metavar="NAME", help=" | ".join(BENCHES))
     p.add_argument("--out", metavar="DIR", default="out/bench",
@@ -303,7 +320,31 @@ def cmd_bench(args, comm) -> None:
     _emit(comm, args, payload, result.get("summary", f"bench {args.name}: see {out_dir}"))
 
 
-COMMANDS = {"info": cmd_info, "steady": cmd_steady, "run": cmd_run, "bench": cmd_bench}
+def cmd_compare(args, comm) -> None:
+    from fxflex.analysis.compare import run_compare
+    from fxflex.io import envelope
+
+    scene = _scene_from_args(args)
+    out_dir = os.path.abspath(args.out)
+    if comm.rank == 0:
+        sys.stderr.write(f"fxflex compare: {', '.join(args.methods)} at 1000, 5000, 10000 rpm;"
+                         f" results into {out_dir}\n")
+
+    def progress(row):
+        if comm.rank == 0:
+            t = 1e3 * row.tip_m
+            sys.stderr.write(f"  {row.method:5s} {row.rpm:6g} rpm  {t[0]:+.5f} {t[1]:+.5f} "
+                             f"{t[2]:+.5f} mm  stable={row.stable}  {row.seconds:.1f} s\n")
+            sys.stderr.flush()
+
+    result = run_compare(scene, args.methods, out_dir, comm, progress=progress)
+    report = result.pop("report")
+    payload = envelope(scene, out_dir=out_dir, **result)
+    _emit(comm, args, payload, report + f"\n(files in {out_dir})")
+
+
+COMMANDS = {"info": cmd_info, "steady": cmd_steady, "run": cmd_run, "compare": cmd_compare,
+            "bench": cmd_bench}
 
 
 def _quiet_logs() -> None:
