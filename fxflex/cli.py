@@ -187,8 +187,8 @@ def cmd_info(args, comm) -> None:
     lines.append("methods:")
     for m in methods:
         d = dofs[m]
-        lines.append(f"  {m:5s} dof {d if d is not None else '-':>7}   {method_info()[m]}"
-                     + ("" if d is not None else "  (not implemented yet)"))
+        note = "" if d is not None else "  (dof known after preprocessing)"
+        lines.append(f"  {m:5s} dof {d if d is not None else '-':>7}   {method_info()[m]}{note}")
     _emit(comm, args, payload, "\n".join(lines))
 
 
