@@ -187,8 +187,12 @@ class GCMS(ReducedFormulation):
         self.Kc2, self.Ks2 = 0.5 * (K[0, 0] - K[1, 1]), 0.5 * (K[0, 1] + K[1, 0])
         self.rot = RotatingSystem(K=self.stiffness(0.0), G=gm.J, N=-gm.J @ gm.J,
                                   f=gm.QP + gm.Q3, n=gm.wP, tip=gm.tip)
-        kmats = [-self.K0, -self.Kc1, -self.Ks1, -self.Kc2, -self.Ks2]
-        if not self.absolute:
+        # relative damping's (c/rho) phi' J xi: one more weighted block, folded into K0 at
+        # constant speed
+        self._J_block = not self.absolute and not self.constant_speed
+        J_const = 0.0 if self.absolute or self._J_block else self.c_rho * self.omega_s
+        kmats = [-self.K0 + J_const * gm.J, -self.Kc1, -self.Ks1, -self.Kc2, -self.Ks2]
+        if self._J_block:
             kmats.append(gm.J)
         self._setup_operators(kmats, [-self.c_rho * np.eye(self.dof)],
                               [gm.QP, gm.QS, gm.Q3, gm.wS, gm.wP])
@@ -211,7 +215,7 @@ class GCMS(ReducedFormulation):
         c, s, c2, s2 = rotation_weights(phi)
         kw, fw = self.kstack.w, self.fw
         kw[1], kw[2], kw[3], kw[4] = c, s, c2, s2
-        if not self.absolute:
+        if self._J_block:
             kw[5] = self.c_rho * w
         r = self.ramp(t)
         fw[0], fw[1], fw[2] = r * c, r * s, r
