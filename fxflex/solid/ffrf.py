@@ -139,6 +139,9 @@ class FFRF(ReducedFormulation):
         """U_tip = Phi_tip eta: the coordinates are already relative to the rotating frame."""
         return self.inv.tip @ q
 
+    def nodal_basis(self) -> tuple[np.ndarray, bool]:
+        return self.modes.vectors[:, : self.dof], False
+
     # -- reference-coordinate row and energies ---------------------------------------------------
     def drive_torque(self, t: float, q: np.ndarray, v: np.ndarray) -> float:
         """Torque (N m) about z that holds the prescribed rotation (module docstring)."""

@@ -56,7 +56,8 @@ from fxflex.solid.model import SolidModel
 from fxflex.solid.reduced import (AffineStack, MeshData, ReducedFormulation, RotatingSystem,
                                   inner, mat_apply, nodal, rotation_weights, tip_rows)
 
-__all__ = ["GCMS", "GlobalModes", "global_modes", "gram_cut", "build", "dof_count"]
+__all__ = ["GCMS", "GlobalModes", "global_basis", "global_modes", "gram_cut", "build",
+           "dof_count"]
 
 G3 = np.diag([0.0, 0.0, 1.0])
 
@@ -96,6 +97,11 @@ def gram_cut(N: np.ndarray, G: np.ndarray, W33: np.ndarray, tol: float
     return T, mus, kept
 
 
+def global_basis(Phi: np.ndarray) -> np.ndarray:
+    """Psi = [G1d Phi, G2d Phi, G3d Phi] = [P_d Phi, S_d Phi, G3_d Phi] (n_owned, 3m)."""
+    return np.hstack([nodal(P3, Phi), nodal(S3, Phi), nodal(G3, Phi)])
+
+
 def _block_maps(m: int) -> dict[str, np.ndarray]:
     """Coefficient maps C_B with B_d Psi = Psi C_B for B = G1^T, G2^T, G3^T, S, P, G3."""
     Z, I = np.zeros((m, m)), np.eye(m)
@@ -133,7 +139,7 @@ class GlobalModes:
 def global_modes(model: SolidModel, data: MeshData, Phi: np.ndarray, tol: float) -> GlobalModes:
     """Build Psi from Phi, cut its Gram matrix at ``tol`` and project (collective on model.comm)."""
     comm, m = model.comm, Phi.shape[1]
-    Psi = np.hstack([nodal(P3, Phi), nodal(S3, Phi), nodal(G3, Phi)])
+    Psi = global_basis(Phi)
     MPsi = mat_apply(data.M, Psi)
     W = inner(comm, Psi, MPsi)
     Kb = inner(comm, Psi, mat_apply(data.K, Psi))
@@ -225,6 +231,11 @@ class GCMS(ReducedFormulation):
     def tip(self, t: float, q: np.ndarray) -> np.ndarray:
         """U_tip = A^T u_f,tip: the rigid rotation removed (SPEC section 2)."""
         return rotation_z(self.drive.angle(t)).T @ (self.gm.tip @ q)
+
+    def nodal_basis(self) -> tuple[np.ndarray, bool]:
+        """Psi~ = [P_d Phi, S_d Phi, G3_d Phi] T, rebuilt on demand (n_owned x r)."""
+        Phi = self.modes.vectors[:, : self.scene.reduction.gcms_modes // 3]
+        return global_basis(Phi) @ self.gm.T, True
 
     # -- reference-coordinate row and energies ---------------------------------------------------
     def _w(self, phi: float) -> tuple[np.ndarray, np.ndarray]:

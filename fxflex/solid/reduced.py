@@ -46,7 +46,8 @@ from fxflex.scene import Drive, Scene
 from fxflex.solid.model import SolidModel
 
 __all__ = ["nodal", "mat_apply", "inner", "tip_rows", "MeshData", "mesh_data",
-           "AffineStack", "RotatingSystem", "ReducedFormulation", "rotation_weights",
+           "AffineStack", "RotatingSystem", "ReducedFormulation", "ModalFieldWriter",
+           "rotation_weights",
            "ab2_root"]
 
 
@@ -270,6 +271,16 @@ class ReducedFormulation:
                            timings={"solve": time.perf_counter() - t0},
                            extra={"modes": int(self.dof)})
 
+    def field_writer(self, path: str) -> "ModalFieldWriter":
+        """``--fields``: an XDMF series of the displacement field rebuilt from the modal state
+        (collective on the communicator the model was built on)."""
+        return ModalFieldWriter(self, path)
+
+    def nodal_basis(self) -> tuple[np.ndarray, bool]:
+        """(B, inertial): this rank's owned displacement entries are B q, measured in o-xyz when
+        ``inertial`` (GCMS) and in O-XYZ otherwise (FFRF)."""
+        raise NotImplementedError
+
     # -- helpers for subclasses ------------------------------------------------------------------
     def _solid_and_modes(self, count: int, model: SolidModel | None, data: MeshData | None,
                          modes=None) -> np.ndarray:
@@ -306,3 +317,37 @@ def rotation_weights(phi: float) -> tuple[float, float, float, float]:
     """(cos phi, sin phi, cos 2 phi, sin 2 phi)."""
     c, s = math.cos(phi), math.sin(phi)
     return c, s, c * c - s * s, 2.0 * s * c
+
+
+class ModalFieldWriter:
+    """Writes the deformation U in O-XYZ and u = A U in o-xyz (names ``U_hub`` and ``u``, as the
+    TLF writer) at each call, to one XDMF/HDF5 pair. Every rank of the build communicator must
+    call ``write`` (with the same replicated state) and ``close``."""
+
+    def __init__(self, form: ReducedFormulation, path: str):
+        from dolfinx import fem
+        from dolfinx.io import XDMFFile
+
+        from fxflex.scene.kinematics import rotation_z
+
+        m = form.model
+        self._rotation = rotation_z
+        self.drive = form.drive
+        self.basis, self.inertial = form.nodal_basis()
+        self.file = XDMFFile(m.comm, path, "w")
+        self.file.write_mesh(m.mesh)
+        self.u, self.U = fem.Function(m.V, name="u"), fem.Function(m.V, name="U_hub")
+        self.n = m.n_owned
+
+    def write(self, t: float, q: np.ndarray) -> None:
+        d = (self.basis @ q).reshape(-1, 3)
+        A = self._rotation(self.drive.angle(t))
+        u, U = (d, d @ A) if self.inertial else (d @ A.T, d)
+        self.u.x.array[: self.n] = u.reshape(-1)
+        self.U.x.array[: self.n] = U.reshape(-1)
+        for f in (self.u, self.U):
+            f.x.scatter_forward()
+            self.file.write_function(f, t)
+
+    def close(self) -> None:
+        self.file.close()

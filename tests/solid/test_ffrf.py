@@ -401,3 +401,22 @@ def test_demo_runs(path, capsys):
 
 def test_demos_found():
     assert DEMOS
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("method", ["ffrf", "gcms"])
+def test_field_writer_rebuilds_the_deflection(tiny, method, tmp_path):
+    """--fields: the written U_hub at the tip centre is the reported deflection, u = A U_hub."""
+    f = tiny.build(method, "reduction.ffrf_modes=10", "reduction.gcms_modes=30")
+    q = np.random.default_rng(5).standard_normal(f.dof) * 1e-3
+    path = tmp_path / "fields.xdmf" if COMM.size == 1 else \
+        pathlib.Path(COMM.bcast(str(tmp_path) if COMM.rank == 0 else None)) / "fields.xdmf"
+    w = f.field_writer(str(path))
+    t = 0.0123
+    w.write(t, q)
+    w.close()
+    m = f.model
+    assert np.allclose(m.tip_displacement(w.U.x.array), f.tip(t, q), rtol=1e-12, atol=1e-18)
+    assert np.allclose(m.tip_displacement(w.u.x.array),
+                       rotation_z(f.drive.angle(t)) @ f.tip(t, q), rtol=1e-12, atol=1e-18)
+    assert path.exists() and path.with_suffix(".h5").exists()
