@@ -212,10 +212,11 @@ class TLF:
         else:
             _axpy(-alpha, d.lift_P, rhs)        # - M_fr u_r''
             _axpy(-beta, d.lift_S, rhs)
-            d.b_arr[:] = rhs
-            d.b_arr[d.root] = d.root_combination(alpha, beta)
-            d.ksp.solve(d.b, d.x)
-            out[:] = d.x_arr
+            rhs[d.root] = d.root_combination(alpha, beta)
+            for j, (rhs_j, b_arr, x_arr) in enumerate(d.components):
+                b_arr[:] = rhs_j
+                d.ksp.solve(d.b, d.x)
+                out[j::3] = x_arr
         if d.c_rho > 0.0:                        # M^-1 D = c / rho
             d.damped_rate(dphi, c, s, q, v)
             _axpy(-d.c_rho, d.y, out)
@@ -242,7 +243,7 @@ class TLF:
             out["mass_lumped"] = d.m_inv.nbytes
         else:
             F = d.ksp.getPC().getFactorMatrix()
-            out["mass_factor"] = int(F.getMumpsInfo(16) * 1e6)   # MB used by this rank's factor
+            out["mass_factor"] = int(F.getMumpsInfo(16) * 1e6)   # MB of this rank's factor
         return out
 
     def field_writer(self, path: str) -> "FieldWriter":
@@ -319,6 +320,7 @@ class _Dynamics:
         V = model.V
         n = model.n_owned
         self.n = n
+        self.rhs = np.empty(n)
         self.force = _make_force(tlf.force_eval, model)
         tlf.timings["force_build"] = time.perf_counter() - t0
         # local (owned + ghost) work functions: displacement in, force out
@@ -347,23 +349,26 @@ class _Dynamics:
             self.m_inv = 1.0 / m
         else:
             Mf = model.compile(model.mass_form())
-            self.M = model.matrix(Mf)                      # root rows/cols identity
             M_full = model.matrix(Mf, bcs=[])
             # M_fr u_r'' = alpha M_fr (P x0)_r + beta M_fr (S x0)_r: two fixed vectors
             self.lift_P = self._lifting(M_full, self.Px0_r)
             self.lift_S = self._lifting(M_full, self.Sx0_r)
             M_full.destroy()
+            # M = M_s (x) I_3: factorise the scalar mass once (1/9 of the entries) and solve the
+            # three components with it
+            self.M = _scalar_mass(model)
             self.ksp = direct_solver(self.M)
             self.ksp.setUp()                               # factorise once, here
             self.b, self.x = self.M.createVecs()
-            self.b_arr, self.x_arr = self.b.getArray(), self.x.getArray()
+            b_arr, x_arr = self.b.getArray(), self.x.getArray()
+            self.components = [(self.rhs[j::3], b_arr, x_arr) for j in range(3)]
         tlf.timings["mass_build"] = time.perf_counter() - t1
         # damping (Eq. 34 relative, Eq. 68 absolute)
         self.c_rho = scene.damping.c / scene.material.rho
         self.relative = scene.damping.model == "relative"
         # step buffers
         self.A = np.eye(3)
-        self.rhs, self.y = np.empty(n), np.empty(n)
+        self.y = np.empty(n)
 
     def _lifting(self, M_full: PETSc.Mat, root_values: np.ndarray) -> np.ndarray:
         r, y = M_full.createVecs()
@@ -410,6 +415,19 @@ def _axpy(a: float, x: np.ndarray, y: np.ndarray, **strides) -> None:
 
 def _owned(vec: PETSc.Vec, n: int) -> np.ndarray:
     return vec.getArray()[:n].copy()
+
+
+def _scalar_mass(model: SolidModel) -> PETSc.Mat:
+    """The scalar consistent mass int rho N_a N_b (Eq. 29 per component), root rows and columns
+    replaced by the identity. Its P1 space numbers the nodes as the vector space does (checked)."""
+    V1 = fem.FunctionSpace(model.mesh, ("Lagrange", 1))
+    im, imv = V1.dofmap.index_map, model.V.dofmap.index_map
+    if not (np.array_equal(V1.dofmap.list.array, model.V.dofmap.list.array)
+            and im.size_local == imv.size_local and np.array_equal(im.ghosts, imv.ghosts)):
+        raise RuntimeError("scalar and vector P1 spaces number the nodes differently")
+    u, v = ufl.TrialFunction(V1), ufl.TestFunction(V1)
+    bc = fem.dirichletbc(0.0, model.root_nodes, V1)
+    return model.matrix(fem.form(model.rho * u * v * model.dx), bcs=[bc])
 
 
 def _lumped_mass_form(model: SolidModel):
