@@ -170,15 +170,24 @@ def _clean_env() -> dict:
     return env
 
 
-def step_timing(scene: Scene, force_eval: str, mass: str, ranks: int, steps: int) -> dict:
-    """``fxflex run`` of ``steps`` CD steps in a child process on ``ranks`` ranks."""
+def step_timing(scene: Scene, force_eval: str, mass: str, ranks: int, steps: int,
+                repeats: int = 2) -> dict:
+    """Best of ``repeats`` ``fxflex run`` children of ``steps`` CD steps on ``ranks`` ranks (the
+    machine is shared: the best run is the one least disturbed)."""
+    runs = [_one_run(scene, force_eval, mass, ranks, steps) for _ in range(repeats)]
+    good = [r for r in runs if "ms_per_step" in r]
+    return min(good, key=lambda r: r["ms_per_step"]) if good else runs[-1]
+
+
+def _one_run(scene: Scene, force_eval: str, mass: str, ranks: int, steps: int) -> dict:
     cmd = [sys.executable, "-m", "fxflex", "run", "--method", "tlf", "--force-eval", force_eval,
            "--mass", mass, "--dt", repr(DT), "--t-end", repr(steps * DT),
            "--sample-dt", repr(steps * DT / 4), "--json"]
     for o in _overrides(scene):
         cmd += ["--set", o]
     if ranks > 1:
-        cmd = ["mpirun", "-n", str(ranks), "--bind-to", "core"] + cmd
+        cmd = ["mpirun", "-n", str(ranks)] + cmd
+    load = os.getloadavg()[0]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=_clean_env(), timeout=3600)
     if proc.returncode != 0:
         return {"force_eval": force_eval, "mass": mass, "ranks": ranks, "error":
@@ -187,7 +196,7 @@ def step_timing(scene: Scene, force_eval: str, mass: str, ranks: int, steps: int
     return {"force_eval": force_eval, "mass": mass, "ranks": ranks, "steps": out["steps"],
             "preprocess_s": out["timings_s"]["preprocess"], "solve_s": out["timings_s"]["solve"],
             "ms_per_step": 1e3 * out["timings_s"]["solve"] / out["steps"],
-            "diverged": out["diverged"] is not None}
+            "diverged": out["diverged"] is not None, "load_average": round(load, 2)}
 
 
 def table4(scene: Scene, comm, divisions, steps: int) -> list[dict]:
