@@ -242,8 +242,9 @@ class TLF:
         if d.mass == "lumped":
             out["mass_lumped"] = d.m_inv.nbytes
         else:
-            F = d.ksp.getPC().getFactorMatrix()
-            out["mass_factor"] = int(F.getMumpsInfo(16) * 1e6)   # MB of this rank's factor
+            # MUMPS INFO(9): real entries of this rank's factor (negative: in millions)
+            entries = d.ksp.getPC().getFactorMatrix().getMumpsInfo(9)
+            out["mass_factor"] = 8 * (entries if entries >= 0 else -entries * 10**6)
         return out
 
     def field_writer(self, path: str) -> "FieldWriter":
