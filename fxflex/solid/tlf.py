@@ -60,6 +60,12 @@ __all__ = ["TLF", "UflForce", "FieldWriter", "build", "dof_count", "tlf_steady",
 #: continuation raises Omega^2 in equal stages (1000 rpm default scene needs 1, 10000 rpm needs 3)
 _STAGE_OMEGA = 2 * math.pi * 6000 / 60
 
+#: C flags for the residual kernel of the time loop: vector instructions of this CPU and
+#: reassociated sums (the kernel's sums over the 8 nodes then vectorise), NaN and inf still
+#: propagate (no -ffinite-math-only). 4.7 -> 3.7 ms per evaluation on the default mesh.
+KERNEL_FLAGS = ["-O2", "-march=native", "-fno-math-errno", "-fno-trapping-math",
+                "-fno-signed-zeros", "-fassociative-math"]
+
 #: mass used when --mass is not given: lumped (see docs/tlf.md, the consistent mass needs a
 #: triangular solve per step and lowers the stable CD step)
 DEFAULT_MASS = "lumped"
@@ -113,7 +119,8 @@ class UflForce:
         t0 = time.perf_counter()
         self.u = fem.Function(model.V)
         self.form = fem.form(forms.svk_residual(model.scene.material, self.u, model.u_test,
-                                                model.dx))
+                                                model.dx),
+                             jit_params={"cffi_extra_compile_args": KERNEL_FLAGS})
         self.constants = cpp.fem.pack_constants(self.form)
         self.coeffs = cpp.fem.pack_coefficients(self.form)
         (self._packed,) = self.coeffs.values()          # (cells, 24), refilled in place
