@@ -11,12 +11,16 @@
 # A coarse 10 x 2 x 2 mesh keeps this to a few seconds.
 
 # %%
+import logging
+
 import numpy as np
 from mpi4py import MPI
 
 from fxflex.formulation import BuildOptions, build
 from fxflex.scene import load_scene
 from fxflex.time import simulate
+
+logging.disable(logging.INFO)            # the JIT compiler's build log on a cold cache
 
 scene = load_scene(overrides=["mesh.solid=[10,2,2]"])
 form = build("tlf", scene, MPI.COMM_WORLD, BuildOptions(force_eval="ufl", mass="lumped"))

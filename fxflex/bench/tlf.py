@@ -22,6 +22,7 @@ of the repeats, and the load average at the start is recorded.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
 import subprocess
@@ -266,6 +267,15 @@ def run(scene: Scene, out_dir: str, comm, quick: bool = False) -> dict:
     if comm.size > 1:
         from fxflex.errors import FxflexError
         raise FxflexError("bench tlf: run it on one process; it starts its own mpirun -n 2")
+    # a cold JIT cache compiles through setuptools, which logs every compiler call at INFO
+    logging.disable(logging.INFO)
+    try:
+        return _run(scene, out_dir, comm, quick)
+    finally:
+        logging.disable(logging.NOTSET)
+
+
+def _run(scene: Scene, out_dir: str, comm, quick: bool) -> dict:
     load = os.getloadavg()[0]
     limits = machine_limits()
     n_steps = 40 if quick else 400

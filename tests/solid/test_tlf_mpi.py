@@ -49,3 +49,12 @@ def test_two_ranks_match_one_process(force_eval, mass):
         print(f"\n{force_eval}/{mass}: {MPI.COMM_WORLD.size} ranks vs 1 after {STEPS} steps: "
               f"tip {tip_err:.1e}, field {field_err:.1e}")
     assert tip_err <= 1e-8 and field_err <= 1e-8
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("mass", ["lumped", "consistent"])
+def test_omega_max_does_not_depend_on_the_partition(mass):
+    scene = load_scene(overrides=["mesh.solid=[20,4,2]"])
+    w = [TLF(scene, comm, BuildOptions(mass=mass)).omega_max()
+         for comm in (MPI.COMM_WORLD, MPI.COMM_SELF)]
+    assert w[0] == pytest.approx(w[1], rel=1e-8)
