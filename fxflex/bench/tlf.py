@@ -25,12 +25,12 @@ import json
 import logging
 import os
 import re
-import subprocess
 import sys
 import time
 
 import numpy as np
 
+from fxflex.bench.common import run_cli
 from fxflex.formulation import BuildOptions
 from fxflex.scene import Scene
 
@@ -154,23 +154,6 @@ def force_timing(form, repeats: int = 20) -> dict:
 
 
 # -- whole steps -----------------------------------------------------------------------------------
-def _overrides(scene: Scene) -> list[str]:
-    return [f"{sec}.{k}={json.dumps(v)}" for sec, table in scene.to_dict().items()
-            for k, v in table.items()]
-
-
-def _clean_env() -> dict:
-    """The environment for a child mpirun: without the variables this process's own MPI
-    (singleton) start set, which would make the child believe it runs inside this job."""
-    keep = ("OMPI_ALLOW_RUN_AS_ROOT", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM",
-            "OMPI_MCA_rmaps_base_oversubscribe")
-    env = {k: v for k, v in os.environ.items()
-           if not (k.startswith(("OMPI_", "PMIX_", "PRTE_", "OPAL_")) and k not in keep)}
-    env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-               OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    return env
-
-
 def step_timing(scene: Scene, force_eval: str, mass: str, ranks: int, steps: int,
                 repeats: int = 2) -> dict:
     """Best of ``repeats`` ``fxflex run`` children of ``steps`` CD steps on ``ranks`` ranks (the
@@ -181,23 +164,17 @@ def step_timing(scene: Scene, force_eval: str, mass: str, ranks: int, steps: int
 
 
 def _one_run(scene: Scene, force_eval: str, mass: str, ranks: int, steps: int) -> dict:
-    cmd = [sys.executable, "-m", "fxflex", "run", "--method", "tlf", "--force-eval", force_eval,
-           "--mass", mass, "--dt", repr(DT), "--t-end", repr(steps * DT),
-           "--sample-dt", repr(steps * DT / 4), "--json"]
-    for o in _overrides(scene):
-        cmd += ["--set", o]
-    if ranks > 1:
-        cmd = ["mpirun", "-n", str(ranks)] + cmd
     load = os.getloadavg()[0]
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=_clean_env(), timeout=3600)
-    if proc.returncode != 0:
-        return {"force_eval": force_eval, "mass": mass, "ranks": ranks, "error":
-                (proc.stderr.strip().splitlines() or ["no output"])[-1]}
-    out = json.loads(proc.stdout.strip().splitlines()[-1])
-    return {"force_eval": force_eval, "mass": mass, "ranks": ranks, "steps": out["steps"],
-            "preprocess_s": out["timings_s"]["preprocess"], "solve_s": out["timings_s"]["solve"],
+    out = run_cli(["run", "--method", "tlf", "--force-eval", force_eval, "--mass", mass,
+                   "--dt", repr(DT), "--t-end", repr(steps * DT),
+                   "--sample-dt", repr(steps * DT / 4)], scene, ranks=ranks)
+    row = {"force_eval": force_eval, "mass": mass, "ranks": ranks, "load_average": round(load, 2)}
+    if "error" in out:
+        return {**row, "error": out["error"]}
+    return {**row, "steps": out["steps"], "preprocess_s": out["timings_s"]["preprocess"],
+            "solve_s": out["timings_s"]["solve"],
             "ms_per_step": 1e3 * out["timings_s"]["solve"] / out["steps"],
-            "diverged": out["diverged"] is not None, "load_average": round(load, 2)}
+            "diverged": out["diverged"] is not None}
 
 
 def table4(scene: Scene, comm, divisions, steps: int) -> list[dict]:
