@@ -349,7 +349,9 @@ COMMANDS = {"info": cmd_info, "steady": cmd_steady, "run": cmd_run, "compare": c
 
 def _quiet_logs() -> None:
     """Warnings and errors only on stderr: FFCx's JIT and its C compiler log at INFO through
-    loggers that set their own level, so the handler itself filters."""
+    loggers that set their own level (setuptools even adds its own root handler on a cold JIT
+    cache), so INFO is disabled outright and the handler filters too."""
+    logging.disable(logging.INFO)
     handler = logging.StreamHandler(sys.stderr)
     handler.setLevel(logging.WARNING)
     handler.setFormatter(logging.Formatter("fxflex: %(levelname)s: %(message)s"))

@@ -71,14 +71,15 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
     k = 1
     while True:
         last = k == nsteps
-        if last or k % check_every == 0:
-            if last or k % sample_every == 0:
+        sample_now = last or k % sample_every == 0
+        if sample_now or k % check_every == 0:
+            if sample_now:
                 tip = sample(k)
                 nsamples += 1
             else:
                 tip = form.tip(t0 + k * dt, q)
             if not np.all(np.isfinite(tip)) or np.max(np.abs(tip)) > limit:
-                if k % sample_every and not last:
+                if not sample_now:
                     tip = sample(k)
                     nsamples += 1
                 reason = ("non-finite deflection" if not np.all(np.isfinite(tip)) else

@@ -1,0 +1,71 @@
+"""The time loop: sampling, divergence stop, and the explicit schemes' order on an oscillator."""
+
+import numpy as np
+import pytest
+
+from fxflex.scene import Scene
+from fxflex.time import AB2, CentralDifference, simulate
+
+
+class Oscillator:
+    """q'' = -w^2 q - 2 zeta w q' (one dof), behind the Formulation interface."""
+
+    method = "oscillator"
+
+    def __init__(self, w=2.0, zeta=0.05, q0=1.0):
+        self.w, self.zeta, self.q0 = w, zeta, q0
+        self.scene = Scene()
+        self.dof = 1
+
+    def initial_state(self):
+        return np.array([self.q0]), np.array([0.0])
+
+    def constrain(self, t, q, v):
+        pass
+
+    def acceleration(self, t, q, v, out):
+        out[:] = -self.w**2 * q - 2 * self.zeta * self.w * v
+
+    def tip(self, t, q):
+        return np.array([q[0], 0.0, 0.0])
+
+    def exact(self, t):
+        w, z = self.w, self.zeta
+        wd = w * np.sqrt(1 - z * z)
+        return self.q0 * np.exp(-z * w * t) * (np.cos(wd * t) + z * w / wd * np.sin(wd * t))
+
+
+@pytest.mark.parametrize("sample_every", [1, 7, 100, 250, 1000])
+def test_samples_every_n_steps_and_at_the_end(sample_every):
+    times = []
+    res = simulate(Oscillator(), "cd", 1e-3, 2.345, sample_every=sample_every,
+                   on_sample=lambda t, tip, ex, q: times.append(t))
+    n = res.steps
+    expected = [k * 1e-3 for k in range(0, n + 1, sample_every)]
+    if n % sample_every:
+        expected.append(n * 1e-3)
+    assert np.allclose(times, expected) and res.samples == len(expected)
+
+
+@pytest.mark.parametrize("scheme", ["ab2", "cd"])
+def test_second_order_and_history(scheme):
+    errors = []
+    for h in (1e-2, 5e-3, 2.5e-3):
+        osc = Oscillator()
+        res = simulate(osc, scheme, h, 5.0, keep_history=True)
+        hist = np.array(res.history)
+        # the largest error over the history: at a single time the leading term may vanish
+        errors.append(np.max(np.abs(hist[:, 1] - osc.exact(hist[:, 0]))))
+    order = np.log2(np.array(errors[:-1]) / errors[1:])
+    assert np.all(np.abs(order - 2) < 0.1), order
+
+
+def test_divergence_stops_early_with_a_reason():
+    osc = Oscillator(w=1e3, zeta=0.0, q0=1e-3)
+    res = simulate(osc, "cd", 2.5e-3, 1.0, sample_every=1000)   # w h = 2.5 > 2
+    assert res.diverged is not None and res.t < 1.0
+    assert "beyond" in res.diverged["reason"] or "non-finite" in res.diverged["reason"]
+
+
+def test_scheme_classes_are_exported():
+    assert AB2.name == "ab2" and CentralDifference.name == "cd"
