@@ -12,7 +12,7 @@ class Oscillator:
 
     method = "oscillator"
 
-    def __init__(self, w=2.0, zeta=0.05, q0=1.0):
+    def __init__(self, w=2.0, zeta=0.05, q0=0.1):
         self.w, self.zeta, self.q0 = w, zeta, q0
         self.scene = Scene()
         self.dof = 1
@@ -40,6 +40,7 @@ def test_samples_every_n_steps_and_at_the_end(sample_every):
     times = []
     res = simulate(Oscillator(), "cd", 1e-3, 2.345, sample_every=sample_every,
                    on_sample=lambda t, tip, ex, q: times.append(t))
+    assert res.diverged is None and res.steps == 2345
     n = res.steps
     expected = [k * 1e-3 for k in range(0, n + 1, sample_every)]
     if n % sample_every:
@@ -53,6 +54,7 @@ def test_second_order_and_history(scheme):
     for h in (1e-2, 5e-3, 2.5e-3):
         osc = Oscillator()
         res = simulate(osc, scheme, h, 5.0, keep_history=True)
+        assert res.diverged is None and abs(res.t - 5.0) < 1e-12
         hist = np.array(res.history)
         # the largest error over the history: at a single time the leading term may vanish
         errors.append(np.max(np.abs(hist[:, 1] - osc.exact(hist[:, 0]))))
