@@ -101,6 +101,9 @@ class ANCF:
 
     method = "ancf"
     extra_columns: tuple[str, ...] = ()
+    #: geometrically exact (absolute coordinates, Green-Lagrange strain): a run stops only beyond
+    #: 2 L of deflection (fxflex.time.driver.divergence_limit)
+    deflection_range = 2.0
 
     def __init__(self, scene: Scene, force_eval: str | None = None):
         from mpi4py import MPI
