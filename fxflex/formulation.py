@@ -116,8 +116,11 @@ def check_options(method: str, options: BuildOptions) -> None:
 
 def build(method: str, scene: Scene, comm, options: BuildOptions | None = None) -> Formulation:
     """Build ``method`` for ``scene`` on communicator ``comm``."""
+    from fxflex.scene.load import validate_for
+
     options = options or BuildOptions()
     check_options(method, options)
+    validate_for(method, scene)
     try:
         module = importlib.import_module(_MODULES[method])
     except ModuleNotFoundError as exc:
