@@ -34,7 +34,7 @@ from fxflex.beam.line import beam_line
 from fxflex.beam.linear import growth_rate, newton, omega_max
 from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
 from fxflex.scene import Drive, Scene
-from fxflex.scene.kinematics import P3, S3
+from fxflex.scene.kinematics import P3, S3, rotation_z
 
 __all__ = ["build", "dof_count", "ANCF", "constrained_slots", "QUADRATURE", "elasticity_matrix",
            "reference_coordinates"]
@@ -288,6 +288,17 @@ class ANCF:
         A = self.drive.A(t)
         x = np.asarray(q[self.tip_dofs], float)
         return A.T @ x - self.e0[self.tip_dofs]
+
+    def rotating_state(self, t: float, q: np.ndarray, v: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """(z, z') on the free coordinates in the rotating frame, as :meth:`linearise` and
+        ``steady_state().q`` use them: each slot turned back, A^T e, and A^T (e' - phi' S e)."""
+        phi, rate, _ = self.drive.state(t)
+        A = rotation_z(phi)
+        e3, v3 = q.reshape(-1, 3), v.reshape(-1, 3)
+        z = (e3 @ A).reshape(-1)                         # rows e^T A = (A^T e)^T
+        zd = ((v3 - rate * e3 @ S3.T) @ A).reshape(-1)
+        return z[self.free_dofs], zd[self.free_dofs]
 
     # ------------------------------------------------------------------ rotating-frame statics
     def _full(self, x_free: np.ndarray) -> np.ndarray:

@@ -225,6 +225,12 @@ class ReducedFormulation:
             K = K + self.c_rho * w * r.G
         return eye, C, K
 
+    def rotating_state(self, t: float, q: np.ndarray, v: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """(z, z') in the coordinates of :meth:`linearise` (FFRF: its own, relative to the
+        rotating frame already)."""
+        return q, v
+
     def eigenvalues(self) -> np.ndarray:
         """Eigenvalues of the linearised rotating system (SPEC section 6, Eq. 59-64)."""
         if self._eig is None:

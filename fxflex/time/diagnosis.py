@@ -40,7 +40,8 @@ def ab2_growth_exponent(omega: float, h: float, t: float) -> float:
 def measured_growth_rate(growth: np.ndarray | None, decades: float = 4.0) -> float | None:
     """Exponential growth rate (1/s) of the deflection magnitudes (t, |U|) before a stop: the
     least-squares slope of ln |U| over the last ``decades`` decades of growth, or None when those
-    points are too few or do not lie on an exponential (R^2 < 0.9)."""
+    points are too few or do not lie on an exponential (R^2 < 0.9, or the slopes of the two
+    halves differ by more than 30 %, as they do for a power law such as a load's t^2 start)."""
     if growth is None or len(growth) < 8:
         return None
     t, amp = growth[:, 0], growth[:, 1]
@@ -60,6 +61,10 @@ def measured_growth_rate(growth: np.ndarray | None, decades: float = 4.0) -> flo
     resid = y - (slope * t + icpt)
     spread = np.sum((y - y.mean()) ** 2)
     if spread <= 0 or 1.0 - np.sum(resid**2) / spread < 0.9 or slope <= 0:
+        return None
+    half = len(t) // 2
+    first, second = np.polyfit(t[:half], y[:half], 1)[0], np.polyfit(t[half:], y[half:], 1)[0]
+    if abs(first - second) > 0.3 * slope:
         return None
     return float(slope)
 

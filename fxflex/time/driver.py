@@ -114,7 +114,7 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
         out = None
         if amp > limit:
             out = {"time_s": t, "kind": "range",
-                   "reason": f"deflection {amp:.3g} m beyond {limit:.3g} m "
+                   "reason": f"deflection {amp:.4g} m beyond the limit {limit:.4g} m "
                              f"({limit / form.scene.geometry.length:g} of the length)"}
             sample_now = True
         if sample_now:

@@ -28,6 +28,24 @@ def run(*args, cwd=None):
     (["run", "--method", "nebb", "--mass", "lumped"], "--mass"),
     (["run", "--method", "tlf", "--out", "/nonexistent/dir/x.csv"], "--out"),
     (["bench", "nosuch"], "nosuch"),
+    # physically meaningless scenes and degenerate meshes (issue 7)
+    (["run", "--method", "lebb", "--rpm", "1e300"], "rotation.rpm"),
+    (["run", "--method", "lebb", "--rpm", "70000"], "allowed: below 6.985e+04 rpm"),
+    (["steady", "--method", "lebb", "--set", "material.E=1e-3"], "rotation.rpm"),
+    (["run", "--method", "lebb", "--set", "load.line_load=-1e12"], "load.line_load"),
+    (["run", "--method", "nebb", "--set", "material.rho=1e-300"], "speed of light"),
+    (["run", "--method", "tlf", "--set", "geometry.root_z=1e-9"], "degenerate section"),
+    (["run", "--method", "tlf", "--set", "mesh.solid=[1,2,2]", "--set",
+      "geometry.twist_deg=180"], "at least 2 divisions along X"),
+    (["run", "--method", "ancf", "--set", "mesh.beam_elements=1", "--set",
+      "geometry.twist_deg=-100"], "at least 2 elements"),
+    (["run", "--method", "ffrf", "--set", "mesh.solid=[2,2,2]", "--set",
+      "reduction.ffrf_modes=100"], "at most 54"),
+    (["run", "--method", "lebb", "--checkpoint-every", "10"], "--checkpoint-every"),
+    (["run", "--method", "lebb", "--checkpoint-every", "0", "--out", "a.csv"],
+     "--checkpoint-every"),
+    (["run", "--method", "lebb", "--resume", "nosuch.ckpt"], "file not found"),
+    (["run", "--method", "tlf", "--resume", "x.ckpt", "--fields", "u.xdmf"], "--fields"),
 ])
 def test_bad_input_is_one_line_and_exit_2(args, words, tmp_path):
     r = run(*args, cwd=tmp_path)
