@@ -4,7 +4,8 @@
 mapped onto the body by :meth:`BeamShape.point_from_unit` (trilinear hexahedra between exact node
 positions: untwisted, the map is trilinear and the volume exact; twisted, the faces are bilinear
 and the volume error falls at second order). The result is cached as ``.msh`` in the cache folder
-keyed by the geometry, the divisions and the ``.geo`` text, and regenerated when any changes.
+keyed by the geometry, the divisions and the ``.geo`` text, and regenerated when any changes
+(never read or written with ``FXFLEX_NO_CACHE=1``, see :mod:`fxflex.cache`).
 Facet tags: ``ROOT`` (x = 0, clamped) and ``TIP`` (x = L).
 """
 
@@ -19,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fxflex.cache import cache_dir
+from fxflex import cache
 from fxflex.mesh.geometry import BeamShape
 from fxflex.scene import Geometry
 
@@ -41,8 +42,13 @@ class SolidMesh:
 
 
 def mesh_key(geometry: Geometry, divisions) -> str:
+    """Hash of what the mesh depends on: geometry, divisions, the ``.geo`` text and the source
+    of this module and of the shape map (snapping every node onto the grid makes the node
+    positions independent of the gmsh version)."""
     text = json.dumps({"geometry": asdict(geometry), "divisions": list(divisions),
-                       "geo": GEO_FILE.read_text()}, sort_keys=True)
+                       "geo": GEO_FILE.read_text(),
+                       "code": cache.code_version(__name__, "fxflex.mesh.geometry")},
+                      sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -72,7 +78,8 @@ def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = T
 
     divisions = tuple(int(n) for n in divisions)
     shape = BeamShape(geometry)
-    path = cache_dir("meshes") / f"beam-{mesh_key(geometry, divisions)}.msh"
+    use_cache = use_cache and cache.enabled("meshes")
+    path = cache.cache_root() / "meshes" / f"beam-{mesh_key(geometry, divisions)}.msh"
     generated = False
     gmsh.initialize(readConfigFiles=False)
     gmsh.option.setNumber("General.Terminal", 0)
@@ -85,10 +92,15 @@ def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = T
                 _generate(gmsh, shape, divisions)
                 generated = True
                 if use_cache:
-                    fd, tmp = tempfile.mkstemp(suffix=".msh", dir=path.parent)
+                    cache.cache_dir("meshes")
+                    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".msh", dir=path.parent)
                     os.close(fd)
-                    gmsh.write(tmp)
-                    os.replace(tmp, path)
+                    try:
+                        gmsh.write(tmp)
+                        cache.publish(tmp, path)
+                    except BaseException:
+                        os.unlink(tmp)
+                        raise
         mesh, cell_tags, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=3)
     finally:
         gmsh.finalize()

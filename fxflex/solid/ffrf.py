@@ -41,7 +41,7 @@ from fxflex.scene.kinematics import P3, S3
 from fxflex.solid.cms import ClampedModes
 from fxflex.solid.model import SolidModel
 from fxflex.solid.reduced import (MeshData, ReducedFormulation, RotatingSystem, inner, mat_apply,
-                                  nodal, tip_rows)
+                                  nodal, reduced_key, tip_rows)
 
 __all__ = ["FFRF", "FFRFInvariants", "ffrf_invariants", "build", "dof_count"]
 
@@ -97,14 +97,14 @@ class FFRF(ReducedFormulation):
                  data: MeshData | None = None):
         super().__init__(scene, comm)
         t0 = time.perf_counter()
-        Phi = self._solid_and_modes(scene.reduction.ffrf_modes, model, data, modes)
-        t1 = time.perf_counter()
-        self.inv = inv = ffrf_invariants(self.model, self.data, Phi)
+        count = scene.reduction.ffrf_modes
+        cached = self._use(count, model, data, modes)
+        key = reduced_key(scene, "ffrf", count) if cached else None
+        self.inv = inv = self._projections(key, FFRFInvariants, ffrf_invariants)
         self.dof = inv.Lambda.shape[0]
         self.rot = RotatingSystem(K=inv.Lambda, G=inv.G, N=inv.N, f=inv.fe, n=inv.n, tip=inv.tip)
         self._build_operators()
-        t2 = time.perf_counter()
-        self.timings.update(invariants=t2 - t1, build=t2 - t0)
+        self.timings["build"] = time.perf_counter() - t0
 
     def _build_operators(self) -> None:
         inv, cr, eye = self.inv, self.c_rho, np.eye(self.dof)
