@@ -91,16 +91,24 @@ def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = T
             else:
                 _generate(gmsh, shape, divisions)
                 generated = True
-                if use_cache:
-                    cache.cache_dir("meshes")
-                    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".msh", dir=path.parent)
-                    os.close(fd)
-                    try:
-                        gmsh.write(tmp)
+                # distribute what a later run reads from the file (the node and cell order of a
+                # freshly generated model differ from the file's, and with them the MPI
+                # partition and every round-off): cold, warm and uncached runs agree exactly
+                folder = cache.cache_dir("meshes") if use_cache else None
+                fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".msh", dir=folder)
+                os.close(fd)
+                try:
+                    gmsh.write(tmp)
+                    gmsh.clear()
+                    gmsh.open(tmp)
+                    if use_cache:
                         cache.publish(tmp, path)
-                    except BaseException:
+                    else:
                         os.unlink(tmp)
-                        raise
+                except BaseException:
+                    if os.path.exists(tmp):
+                        os.unlink(tmp)
+                    raise
         mesh, cell_tags, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=3)
     finally:
         gmsh.finalize()
