@@ -250,6 +250,8 @@ def cmd_run(args, comm) -> None:
     nsteps = max(int(round(args.t_end / dt)), 1)
     sample_dt = args.sample_dt or max(dt, args.t_end / 20000)
     sample_every = max(1, int(round(sample_dt / dt)))
+    if not (args.out or args.fields):
+        sample_every = nsteps       # nothing to write: only the final deflection is reported
     extra_cols = list(getattr(form, "extra_columns", []))
     columns = ["t_s", "longitudinal_m", "orthogonal_m", "load_m"] + extra_cols
     meta = envelope(scene, method=args.method, integrator=integrator, dt_s=dt,
@@ -271,7 +273,8 @@ def cmd_run(args, comm) -> None:
 
     try:
         res = simulate(form, integrator, dt, args.t_end, sample_every=sample_every,
-                       on_sample=on_sample, progress=progress)
+                       on_sample=on_sample if writer or fields else None, progress=progress,
+                       extras=writer is not None)
     finally:
         if writer is not None:
             writer.close()

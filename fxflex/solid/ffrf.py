@@ -114,8 +114,11 @@ class FFRF(ReducedFormulation):
             w = self.omega_s
             K = inv.Lambda - w * w * inv.N + ab * cr * w * inv.G
             C = 2.0 * w * inv.G + cr * eye
-            self._setup_operators([-K], [-C], [inv.fe, w * w * inv.n])
-            self.fw[1] = 1.0
+            if self.drive.at_rest:               # no centrifugal load column
+                self._setup_operators([-inv.Lambda], [-cr * eye], [inv.fe])
+            else:
+                self._setup_operators([-K], [-C], [inv.fe, w * w * inv.n])
+                self.fw[1] = 1.0
         else:
             self._setup_operators([-inv.Lambda, -inv.G, inv.N], [-inv.G, -eye],
                                   [inv.fe, inv.g, inv.n])

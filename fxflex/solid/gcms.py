@@ -199,11 +199,16 @@ class GCMS(ReducedFormulation):
         # constant speed
         self._J_block = not self.absolute and not self.constant_speed
         J_const = 0.0 if self.absolute or self._J_block else self.c_rho * self.omega_s
-        kmats = [-self.K0 + J_const * gm.J, -self.Kc1, -self.Ks1, -self.Kc2, -self.Ks2]
-        if self._J_block:
-            kmats.append(gm.J)
-        self._setup_operators(kmats, [-self.c_rho * np.eye(self.dof)],
-                              [gm.QP, gm.QS, gm.Q3, gm.wS, gm.wP])
+        if self.drive.at_rest:
+            # phi = 0 for all t: K(0), the load A F = F and no inertia load, one matrix each
+            self._setup_operators([-self.stiffness(0.0)], [-self.c_rho * np.eye(self.dof)],
+                                  [gm.QP + gm.Q3])
+        else:
+            kmats = [-self.K0 + J_const * gm.J, -self.Kc1, -self.Ks1, -self.Kc2, -self.Ks2]
+            if self._J_block:
+                kmats.append(gm.J)
+            self._setup_operators(kmats, [-self.c_rho * np.eye(self.dof)],
+                                  [gm.QP, gm.QS, gm.Q3, gm.wS, gm.wP])
         self._dK = AffineStack([self.Kc1, self.Ks1, self.Kc2, self.Ks2])
         self.timings["build"] = time.perf_counter() - t0
 
@@ -218,6 +223,9 @@ class GCMS(ReducedFormulation):
         return c * self.gm.MP + s * self.gm.J + self.gm.MG3
 
     def _weights(self, t: float) -> None:
+        if self.drive.at_rest:
+            self.fw[0] = self.ramp(t)
+            return
         phi, w, a = self.drive.state(t)
         c, s, c2, s2 = rotation_weights(phi)
         kw, fw = self.kstack.w, self.fw

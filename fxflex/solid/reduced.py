@@ -219,7 +219,8 @@ class ReducedFormulation:
         self.drive = Drive(scene.rotation)
         self.c_rho = scene.damping.c / scene.material.rho
         self.absolute = scene.damping.model == "absolute"
-        self.constant_speed = scene.rotation.profile == "constant"
+        # at rest (0 rpm) a spin-up is no spin-up: every rotation term is identically zero
+        self.constant_speed = scene.rotation.profile == "constant" or self.drive.at_rest
         self.timings: dict[str, float] = {}
         self._eig = None
 
