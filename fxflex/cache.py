@@ -49,9 +49,9 @@ def cache_root() -> Path:
 
 
 def enabled(kind: str | None = None) -> bool:
-    """Whether ``kind`` (or any kind) may be read and written: ``FXFLEX_NO_CACHE`` unset, empty
-    or 0 allows all, a comma-separated list of kinds (``modes,reduced``) bars those, anything
-    else (``1``) bars all."""
+    """Whether ``kind`` may be read and written (no kind: whether every kind may).
+    ``FXFLEX_NO_CACHE`` unset, empty or 0 allows all, a comma-separated list of kinds
+    (``modes,reduced``) bars those, anything else (``1``) bars all."""
     value = os.environ.get("FXFLEX_NO_CACHE", "").strip()
     if value in ("", "0"):
         return True

@@ -17,6 +17,7 @@ import sys
 import time
 
 from fxflex import __version__
+from fxflex.cache import KINDS as CACHE_KINDS
 from fxflex.errors import FxflexError
 from fxflex.scene import METHODS, load_scene
 
@@ -135,6 +136,13 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", default="out/compare",
                    help="output folder (default out/compare)")
     _common(p)
+
+    p = sub.add_parser("cache", help="what fxflex keeps on disk between runs (meshes, eigenmodes, "
+                                     "invariant matrices): list it or clear it")
+    p.add_argument("action", choices=("info", "clear"), metavar="ACTION", help="info | clear")
+    p.add_argument("--kind", choices=tuple(CACHE_KINDS), metavar="KIND",
+                   help="only this kind: " + " | ".join(CACHE_KINDS))
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
     p = sub.add_parser("bench", help="benchmarks; tables written to --out")
     p.add_argument("name", choices=BENCHES, metavar="NAME", help=" | ".join(BENCHES))
@@ -346,7 +354,38 @@ def cmd_compare(args, comm) -> None:
     _emit(comm, args, payload, report + f"\n(files in {out_dir})")
 
 
-COMMANDS = {"info": cmd_info, "steady": cmd_steady, "run": cmd_run, "compare": cmd_compare,
+def cmd_cache(args, comm) -> None:
+    """``fxflex cache info|clear [--kind KIND]``: the folder (``$FXFLEX_CACHE`` or
+    ~/.cache/fxflex), what each kind holds, and whether ``FXFLEX_NO_CACHE`` bypasses it."""
+    from fxflex import cache
+    from fxflex.io import envelope
+    from fxflex.scene import Scene
+
+    if args.kind and args.action != "clear":
+        raise FxflexError("--kind: only with 'clear' (info lists every kind)")
+    kinds = cache.usage()
+    removed = None
+    if args.action == "clear":
+        removed = cache.clear(args.kind) if comm.rank == 0 else {}
+        comm.Barrier()
+        kinds = cache.usage()
+    payload = envelope(Scene(), cache_dir=str(cache.cache_root()),
+                       enabled={k: cache.enabled(k) for k in cache.KINDS},
+                       kinds=kinds, removed=removed)
+    lines = [f"fxflex cache: {cache.cache_root()}"]
+    if removed is not None:
+        freed = sum(v["bytes"] for v in removed.values())
+        lines.append(f"  removed {sum(v['files'] for v in removed.values())} file(s), "
+                     f"{freed / 2**20:.1f} MiB" + (f" of kind {args.kind}" if args.kind else ""))
+    for kind, what in cache.KINDS.items():
+        k = kinds.get(kind, {"files": 0, "bytes": 0})
+        off = "" if cache.enabled(kind) else " [bypassed: FXFLEX_NO_CACHE]"
+        lines.append(f"  {kind:15s} {k['files']:5d} file(s) {k['bytes'] / 2**20:9.1f} MiB   "
+                     f"{what}{off}")
+    _emit(comm, args, payload, "\n".join(lines))
+
+
+COMMANDS = {"cache": cmd_cache, "info": cmd_info, "steady": cmd_steady, "run": cmd_run, "compare": cmd_compare,
             "bench": cmd_bench}
 
 
