@@ -199,7 +199,8 @@ class GCMS(ReducedFormulation):
         # constant speed
         self._J_block = not self.absolute and not self.constant_speed
         J_const = 0.0 if self.absolute or self._J_block else self.c_rho * self.omega_s
-        if self.drive.at_rest:
+        self._at_rest = self.drive.at_rest
+        if self._at_rest:
             # phi = 0 for all t: K(0), the load A F = F and no inertia load, one matrix each
             self._setup_operators([-self.stiffness(0.0)], [-self.c_rho * np.eye(self.dof)],
                                   [gm.QP + gm.Q3])
@@ -223,7 +224,7 @@ class GCMS(ReducedFormulation):
         return c * self.gm.MP + s * self.gm.J + self.gm.MG3
 
     def _weights(self, t: float) -> None:
-        if self.drive.at_rest:
+        if self._at_rest:
             self.fw[0] = self.ramp(t)
             return
         phi, w, a = self.drive.state(t)
