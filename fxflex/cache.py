@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import importlib
+import importlib.metadata
 import importlib.util
 import json
 import os
@@ -95,13 +95,15 @@ def code_version(*modules: str) -> str:
 
 
 def _library_versions() -> str:
-    import numpy
-    versions = {"numpy": numpy.__version__}
-    for lib in ("dolfinx", "petsc4py", "slepc4py", "basix", "ffcx", "scipy"):
+    """Installed versions from the package metadata (importing the libraries to ask them would
+    cost what a cache hit saves)."""
+    versions = {}
+    for dist in ("numpy", "scipy", "fenics-dolfinx", "fenics-basix", "fenics-ffcx", "fenics-ufl",
+                 "petsc4py", "slepc4py"):
         try:
-            versions[lib] = importlib.import_module(lib).__version__
-        except (ImportError, AttributeError):
-            versions[lib] = None
+            versions[dist] = importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            versions[dist] = None
     return json.dumps(versions, sort_keys=True)
 
 

@@ -25,14 +25,17 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from mpi4py import MPI
-from petsc4py import PETSc
-from slepc4py import SLEPc
 
 from fxflex import cache
-from fxflex.solid.model import SolidModel
+
+if TYPE_CHECKING:                   # a cache hit needs neither PETSc nor dolfinx: imported on use
+    from petsc4py import PETSc
+
+    from fxflex.solid.model import SolidModel
 
 __all__ = ["ClampedModes", "clamped_modes", "mass_and_stiffness", "modes_key", "CODE_MODULES"]
 
@@ -107,6 +110,8 @@ def clamped_modes(model: SolidModel, count: int, *, K: PETSc.Mat | None = None,
 
 
 def _solve(model: SolidModel, count: int, K, M, tol: float) -> ClampedModes:
+    from slepc4py import SLEPc
+
     t0 = time.perf_counter()
     if K is None or M is None:
         K, M = mass_and_stiffness(model)

@@ -32,16 +32,19 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fxflex.formulation import BuildOptions
 from fxflex.scene import Scene
 from fxflex.scene.kinematics import P3, S3
-from fxflex.solid.cms import ClampedModes
-from fxflex.solid.model import SolidModel
 from fxflex.solid.reduced import (MeshData, ReducedFormulation, RotatingSystem, inner, mat_apply,
                                   nodal, reduced_key, tip_rows)
+
+if TYPE_CHECKING:                   # a cache hit needs neither dolfinx nor SLEPc: imported on use
+    from fxflex.solid.cms import ClampedModes
+    from fxflex.solid.model import SolidModel
 
 __all__ = ["FFRF", "FFRFInvariants", "ffrf_invariants", "build", "dof_count"]
 

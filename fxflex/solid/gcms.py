@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,10 +52,12 @@ from fxflex.errors import FxflexError
 from fxflex.formulation import BuildOptions
 from fxflex.scene import Scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
-from fxflex.solid.cms import ClampedModes
-from fxflex.solid.model import SolidModel
 from fxflex.solid.reduced import (AffineStack, MeshData, ReducedFormulation, RotatingSystem,
                                   inner, mat_apply, nodal, reduced_key, rotation_weights, tip_rows)
+
+if TYPE_CHECKING:                   # a cache hit needs neither dolfinx nor SLEPc: imported on use
+    from fxflex.solid.cms import ClampedModes
+    from fxflex.solid.model import SolidModel
 
 __all__ = ["GCMS", "GlobalModes", "global_basis", "global_modes", "gram_cut", "build",
            "dof_count"]

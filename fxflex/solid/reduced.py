@@ -43,16 +43,20 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from mpi4py import MPI
-from petsc4py import PETSc
 
 from fxflex import cache
 from fxflex.beam.linear import companion_eigenvalues
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
-from fxflex.solid.model import SolidModel
+
+if TYPE_CHECKING:                   # a cache hit needs neither PETSc nor dolfinx: imported on use
+    from petsc4py import PETSc
+
+    from fxflex.solid.model import SolidModel
 
 __all__ = ["nodal", "mat_apply", "inner", "tip_rows", "MeshData", "mesh_data",
            "AffineStack", "RotatingSystem", "ReducedFormulation", "ModalFieldWriter",
@@ -337,6 +341,8 @@ class ReducedFormulation:
 
     @property
     def model(self) -> SolidModel:
+        from fxflex.solid.model import SolidModel
+
         if self._model is None:
             self._model = SolidModel(self.scene, self.build_comm)
             self.timings["mesh"] = self._model.timings.get("mesh", 0.0)
