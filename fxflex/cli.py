@@ -121,7 +121,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--force-eval", choices=("ufl", "invariant", "element"),
                    help="internal force route: tlf ufl|invariant, nebb/ancf invariant|element")
     p.add_argument("--mass", choices=("consistent", "lumped"), help="tlf mass matrix")
-    p.add_argument("--out", metavar="FILE.csv", help="write the time series as it goes")
+    p.add_argument("--out", metavar="FILE.csv",
+                   help="write the time series as it goes (without --out and --fields nothing "
+                        "is sampled: only the final deflection is reported)")
     p.add_argument("--fields", metavar="FILE.xdmf",
                    help="write the displacement field every --fields-every samples (solids)")
     p.add_argument("--fields-every", type=int, default=100, metavar="N",

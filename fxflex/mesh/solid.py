@@ -94,7 +94,12 @@ def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = T
                 # distribute what a later run reads from the file (the node and cell order of a
                 # freshly generated model differ from the file's, and with them the MPI
                 # partition and every round-off): cold, warm and uncached runs agree exactly
-                folder = cache.cache_dir("meshes") if use_cache else None
+                folder = None
+                if use_cache:
+                    try:
+                        folder = cache.cache_dir("meshes")
+                    except OSError:             # not writable: mesh without caching
+                        use_cache = False
                 fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".msh", dir=folder)
                 os.close(fd)
                 try:
@@ -112,6 +117,6 @@ def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = T
         mesh, cell_tags, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=3)
     finally:
         gmsh.finalize()
-    generated = comm.bcast(generated, root=0)
+    generated, use_cache = comm.bcast((generated, use_cache), root=0)
     return SolidMesh(mesh=mesh, cell_tags=cell_tags, facet_tags=facet_tags, shape=shape,
                      divisions=divisions, path=path if use_cache else None, generated=generated)
