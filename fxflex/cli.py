@@ -135,7 +135,12 @@ def make_parser() -> argparse.ArgumentParser:
     _common(p)
 
     p = sub.add_parser("cache", help="what fxflex keeps on disk between runs (meshes, eigenmodes, "
-                                     "invariant matrices): list it or clear it")
+                                     "invariant matrices): list it or clear it",
+                       description="The cache folder is $FXFLEX_CACHE (default ~/.cache/fxflex). "
+                                   "FXFLEX_NO_CACHE=1 makes every command bypass it "
+                                   "(FXFLEX_NO_CACHE=modes,reduced: only those kinds). Entries "
+                                   "are keyed by everything they depend on, so clearing is only "
+                                   "needed to free disk space (docs/performance.md).")
     p.add_argument("action", choices=("info", "clear"), metavar="ACTION", help="info | clear")
     p.add_argument("--kind", choices=tuple(CACHE_KINDS), metavar="KIND",
                    help="only this kind: " + " | ".join(CACHE_KINDS))

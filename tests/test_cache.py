@@ -84,3 +84,10 @@ def test_cache_command_lists_and_clears(folder):
     assert not (folder / "modes").exists() and (folder / "reduced" / "k2.npz").exists()
     assert fx("clear")["removed"]["reduced"]["files"] == 1
     assert not (folder / "reduced").exists()
+
+
+def test_cache_command_bad_input_is_one_line(folder):
+    r = subprocess.run([sys.executable, "-m", "fxflex", "cache", "info", "--kind", "modes"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.strip().startswith("fxflex: error: --kind") and len(r.stderr.splitlines()) == 1

@@ -54,10 +54,10 @@ def test_modes_hit_is_identical_and_every_keyed_input_misses(folder, monkeypatch
     assert key() == base
     keys = {name: key(scene) for name, scene in _variants(SCENE).items()}
     keys.update(count=key(count=7), tol=key(tol=1e-10), quadrature=key(degree=3))
-    monkeypatch.setattr(cache, "code_version", lambda *modules: "edited")
-    keys["code"] = key()
+    with monkeypatch.context() as patch:           # (undo only this, not the cache folder)
+        patch.setattr(cache, "code_version", lambda *modules: "edited")
+        keys["code"] = key()
     assert base not in keys.values() and len(set(keys.values())) == len(keys)
-    monkeypatch.undo()
     other = SolidModel(SCENE.replace(**{"material.E": 200e9}), SELF)
     c = clamped_modes(other, 6)
     assert not c.from_cache and np.allclose(c.omega2, a.omega2 * 200 / 210, rtol=1e-10)
@@ -137,3 +137,15 @@ def test_modes_written_on_one_rank_serve_two_and_back(folder):
         assert back.from_cache
         assert np.abs(back.vectors - again.vectors).max() < 1e-8 * np.abs(again.vectors).max()
     COMM.Barrier()
+
+
+@pytest.mark.mpi
+def test_reduced_model_written_on_one_rank_serves_two(folder):
+    serial = build("ffrf", SCENE, SELF).steady_state().tip if COMM.rank == 0 else None
+    serial = COMM.bcast(serial, root=0)
+    read = build("ffrf", SCENE, COMM)
+    with cache.bypass():
+        fresh = build("ffrf", SCENE, COMM)
+    assert "cache_load" in read.timings and "cache_load" not in fresh.timings
+    assert np.array_equal(read.steady_state().tip, serial)
+    assert np.allclose(fresh.steady_state().tip, serial, rtol=1e-9, atol=0)
