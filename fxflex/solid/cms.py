@@ -40,7 +40,8 @@ if TYPE_CHECKING:                   # a cache hit needs neither PETSc nor dolfin
 __all__ = ["ClampedModes", "clamped_modes", "mass_and_stiffness", "modes_key", "CODE_MODULES"]
 
 #: modules whose source decides the modes (with the mesh key): a change makes a new cache entry
-CODE_MODULES = ("fxflex.solid.cms", "fxflex.solid.forms", "fxflex.solid.model")
+CODE_MODULES = ("fxflex.solid.cms", "fxflex.solid.forms", "fxflex.solid.model",
+                "fxflex.scene.model", "fxflex.scene.kinematics")
 
 
 @dataclass(frozen=True)
