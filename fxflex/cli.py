@@ -17,6 +17,7 @@ import sys
 import time
 
 from fxflex import __version__
+from fxflex.cache import KINDS as CACHE_KINDS
 from fxflex.errors import FxflexError
 from fxflex.scene import METHODS, load_scene
 
@@ -35,28 +36,23 @@ class _Parser(argparse.ArgumentParser):
         raise FxflexError(message)
 
 
-def _positive(name):
+def _number(name, positive: bool = False):
+    """argparse type: a finite float (> 0 when ``positive``); argparse prefixes the option name."""
     def check(text):
         try:
             value = float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}: expected a number, got {text!r}") from None
-        if not (value > 0 and math.isfinite(value)):
-            raise argparse.ArgumentTypeError(f"{name}: must be > 0, got {text!r}")
-        return value
-    return check
-
-
-def _number(name):
-    def check(text):
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}: expected a number, got {text!r}") from None
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
         if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"{name}: expected a finite number, got {text!r}")
+            raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+        if positive and not value > 0:
+            raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
         return value
     return check
+
+
+def _positive(name):
+    return _number(name, positive=True)
 
 
 def _method(text):
@@ -120,7 +116,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--force-eval", choices=("ufl", "invariant", "element"),
                    help="internal force route: tlf ufl|invariant, nebb/ancf invariant|element")
     p.add_argument("--mass", choices=("consistent", "lumped"), help="tlf mass matrix")
-    p.add_argument("--out", metavar="FILE.csv", help="write the time series as it goes")
+    p.add_argument("--out", metavar="FILE.csv",
+                   help="write the time series as it goes (without --out and --fields nothing "
+                        "is sampled: only the final deflection is reported)")
     p.add_argument("--fields", metavar="FILE.xdmf",
                    help="write the displacement field every --fields-every samples (solids)")
     p.add_argument("--fields-every", type=int, default=100, metavar="N",
@@ -131,8 +129,8 @@ def make_parser() -> argparse.ArgumentParser:
                    help="write a checkpoint (.npz, atomically replaced) every "
                         "--checkpoint-every steps")
     p.add_argument("--checkpoint-every", type=int, metavar="N",
-                   help="steps between checkpoints; default 1000 samples' worth (with "
-                        "--checkpoint) or the resumed run's; alone it writes FILE.csv.ckpt")
+                   help="steps between checkpoints; default 5 %% of the run (with --checkpoint) "
+                        "or the resumed run's; without --checkpoint it writes FILE.csv.ckpt")
     p.add_argument("--resume", metavar="CHECKPOINT",
                    help="continue the run a checkpoint belongs to (same scene and run options): "
                         "the series is cut back to the checkpoint and appended")
@@ -144,6 +142,18 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", default="out/compare",
                    help="output folder (default out/compare)")
     _common(p)
+
+    p = sub.add_parser("cache", help="what fxflex keeps on disk between runs (meshes, eigenmodes, "
+                                     "invariant matrices): list it or clear it",
+                       description="The cache folder is $FXFLEX_CACHE (default ~/.cache/fxflex). "
+                                   "FXFLEX_NO_CACHE=1 makes every command bypass it "
+                                   "(FXFLEX_NO_CACHE=modes,reduced: only those kinds). Entries "
+                                   "are keyed by everything they depend on, so clearing is only "
+                                   "needed to free disk space (docs/performance.md).")
+    p.add_argument("action", choices=("info", "clear"), metavar="ACTION", help="info | clear")
+    p.add_argument("--kind", choices=tuple(CACHE_KINDS), metavar="KIND",
+                   help="only this kind: " + " | ".join(CACHE_KINDS))
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
     p = sub.add_parser("bench", help="benchmarks; tables written to --out")
     p.add_argument("name", choices=BENCHES, metavar="NAME", help=" | ".join(BENCHES))
@@ -252,24 +262,27 @@ def cmd_run(args, comm) -> None:
         raise FxflexError(f"--fields-every: must be >= 1, got {args.fields_every}")
     if args.checkpoint_every is not None and args.checkpoint_every < 1:
         raise FxflexError(f"--checkpoint-every: must be >= 1 step, got {args.checkpoint_every}")
-    nsteps = max(int(round(args.t_end / dt)), 1)
-    sample_dt = args.sample_dt or max(dt, args.t_end / 20000)
-    sample_every = max(1, int(round(sample_dt / dt)))
-    settings = {"method": args.method, "integrator": integrator, "dt_s": dt,
-                "t_end_s": args.t_end, "t0_s": 0.0, "sample_every": sample_every,
-                "rho_inf": args.rho_inf if integrator == "generalized-alpha" else None}
     out_path, ckpt_path, ckpt_every = args.out, args.checkpoint, args.checkpoint_every
-    resumed = None
+    resumed = series = None
     if args.resume:
         if args.fields:
             raise FxflexError("--fields: cannot be combined with --resume (an XDMF series "
                               "cannot be continued); write the fields in a run of its own")
         resumed, arrays = load_checkpoint(args.resume, comm)
-        check_settings(resumed, scene.to_dict(), scene.hash, settings, args.resume)
         series = resumed.get("series")
         if series is None and args.out:
             raise FxflexError("--out: the checkpointed run wrote no series; resume without --out")
         out_path = args.out or (series["path"] if series else None)
+    nsteps = max(int(round(args.t_end / dt)), 1)
+    sample_dt = args.sample_dt or max(dt, args.t_end / 20000)
+    sample_every = max(1, int(round(sample_dt / dt)))
+    if not (out_path or args.fields):
+        sample_every = nsteps       # nothing to write: only the final deflection is reported
+    settings = {"method": args.method, "integrator": integrator, "dt_s": dt,
+                "t_end_s": args.t_end, "t0_s": 0.0, "sample_every": sample_every,
+                "rho_inf": args.rho_inf if integrator == "generalized-alpha" else None}
+    if resumed is not None:
+        check_settings(resumed, scene.to_dict(), scene.hash, settings, args.resume)
         if series is not None:
             ok = None
             if comm.rank == 0:
@@ -287,7 +300,7 @@ def cmd_run(args, comm) -> None:
                               "whose name + .ckpt is then used)")
         ckpt_path = out_path + ".ckpt"
     if ckpt_path is not None and ckpt_every is None:
-        ckpt_every = 1000 * sample_every
+        ckpt_every = max(nsteps // 20, 1)         # every 5 % of the run
     t0 = time.perf_counter()
     form = build(args.method, scene, comm, options)
     t_pre = time.perf_counter() - t0
@@ -318,7 +331,6 @@ def cmd_run(args, comm) -> None:
                     mass=settings["mass"])
     writer = None
     if out_path:
-        series = resumed.get("series") if resumed else None
         writer = SeriesWriter(out_path, meta, columns, enabled=comm.rank == 0,
                               resume=(series["bytes"], series["sha256"]) if series else None)
     checkpoint = None
@@ -345,7 +357,8 @@ def cmd_run(args, comm) -> None:
 
     try:
         res = simulate(form, integrator, dt, args.t_end, sample_every=sample_every,
-                       on_sample=on_sample, progress=progress, state=state, resume=resume,
+                       on_sample=on_sample if writer or fields else None, progress=progress,
+                       extras=writer is not None, state=state, resume=resume,
                        checkpoint_every=ckpt_every or 0, on_checkpoint=checkpoint)
     finally:
         if writer is not None:
@@ -430,7 +443,38 @@ def cmd_compare(args, comm) -> None:
     _emit(comm, args, payload, report + f"\n(files in {out_dir})")
 
 
-COMMANDS = {"info": cmd_info, "steady": cmd_steady, "run": cmd_run, "compare": cmd_compare,
+def cmd_cache(args, comm) -> None:
+    """``fxflex cache info|clear [--kind KIND]``: the folder (``$FXFLEX_CACHE`` or
+    ~/.cache/fxflex), what each kind holds, and whether ``FXFLEX_NO_CACHE`` bypasses it."""
+    from fxflex import cache
+    from fxflex.io import envelope
+    from fxflex.scene import Scene
+
+    if args.kind and args.action != "clear":
+        raise FxflexError("--kind: only with 'clear' (info lists every kind)")
+    kinds = cache.usage()
+    removed = None
+    if args.action == "clear":
+        removed = cache.clear(args.kind) if comm.rank == 0 else {}
+        comm.Barrier()
+        kinds = cache.usage()
+    payload = envelope(Scene(), cache_dir=str(cache.cache_root()),
+                       enabled={k: cache.enabled(k) for k in cache.KINDS},
+                       kinds=kinds, removed=removed)
+    lines = [f"fxflex cache: {cache.cache_root()}"]
+    if removed is not None:
+        freed = sum(v["bytes"] for v in removed.values())
+        lines.append(f"  removed {sum(v['files'] for v in removed.values())} file(s), "
+                     f"{freed / 2**20:.1f} MiB" + (f" of kind {args.kind}" if args.kind else ""))
+    for kind, what in cache.KINDS.items():
+        k = kinds.get(kind, {"files": 0, "bytes": 0})
+        off = "" if cache.enabled(kind) else " [bypassed: FXFLEX_NO_CACHE]"
+        lines.append(f"  {kind:15s} {k['files']:5d} file(s) {k['bytes'] / 2**20:9.1f} MiB   "
+                     f"{what}{off}")
+    _emit(comm, args, payload, "\n".join(lines))
+
+
+COMMANDS = {"cache": cmd_cache, "info": cmd_info, "steady": cmd_steady, "run": cmd_run, "compare": cmd_compare,
             "bench": cmd_bench}
 
 

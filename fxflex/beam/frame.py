@@ -146,6 +146,8 @@ class FloatingFrameBeam:
         self.Minv = 0.5 * (Minv + Minv.T)
         self.MiK, self.MiG, self.MiN = self.Minv @ self.K, self.Minv @ self.G, self.Minv @ self.N
         self.Mi_fq, self.Mi_tip = self.Minv @ self.fq, self.Minv @ self.ftip
+        self.Mi_load = self.Mi_fq + self.Mi_tip          # both follow the load ramp
+        self.at_rest = self.drive.at_rest                # no Coriolis, no inertia loads
         self.Mi_g, self.Mi_n = self.Minv @ self.g, self.Minv @ self.n
         n = self.dof
         self._Kq, self._Cv, self._nn = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
@@ -205,14 +207,15 @@ class FloatingFrameBeam:
             self._coefficients(rate, accel)
         w1 = self._w1
         np.dot(self._Kq, q, out=out)
-        np.dot(self._Cv, v, out=w1)
+        if self.at_rest:                                   # M^-1 (2 phi' G + D) = c/rho I
+            np.multiply(v, self.c_rho, out=w1)
+        else:
+            np.dot(self._Cv, v, out=w1)
         out += w1
         np.negative(out, out=out)
-        out += self._f
-        lam = self.scene.load.factor(t)
-        np.multiply(self.Mi_fq, lam, out=w1)
-        out += w1
-        np.multiply(self.Mi_tip, lam, out=w1)
+        if not self.at_rest:                               # - phi'' g + phi'^2 n
+            out += self._f
+        np.multiply(self.Mi_load, self.scene.load.factor(t), out=w1)
         out += w1
         if self.nonlinear:
             self._Wfull[6:] = q

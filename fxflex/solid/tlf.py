@@ -167,8 +167,9 @@ class TLF:
         self.dof = self.model.dof
         self.force_eval = options.force_eval or FORCE_EVAL["tlf"][0]
         self.mass_kind = options.mass or DEFAULT_MASS
-        self.hub_frame = hub_frame
         self.drive = Drive(scene.rotation)
+        # at rest A = I: the hub-frame turn of the force (below) would multiply by identities
+        self.hub_frame = hub_frame and not self.drive.at_rest
         self.timings = dict(self.model.timings)
         self._dyn: _Dynamics | None = None
         self._omega_max: float | None = None
@@ -228,8 +229,11 @@ class TLF:
                 d.ksp.solve(d.b, d.x)
                 out[j::3] = x_arr
         if d.c_rho > 0.0:                        # M^-1 D = c / rho
-            d.damped_rate(dphi, c, s, q, v)
-            _axpy(-d.c_rho, d.y, out)
+            if dphi == 0.0:                      # not turning: both models damp u'
+                _axpy(-d.c_rho, v, out)
+            else:
+                d.damped_rate(dphi, c, s, q, v)
+                _axpy(-d.c_rho, d.y, out)
         out[d.root] = d.root_combination(alpha, beta)
 
     def tip(self, t: float, q: np.ndarray) -> np.ndarray:
