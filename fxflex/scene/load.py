@@ -198,19 +198,23 @@ def _check_physics(scene: Scene) -> None:
                               f"with material.E = {mat.E!r}): meaningless for an elastic body")
 
 
+def _twist_per_element(scene: Scene, key: str, count: int, what: str) -> None:
+    """Reject a twist of more than MAX_TWIST_PER_ELEMENT_DEG between an element's two ends."""
+    twist = scene.geometry.twist_deg
+    per = abs(twist) / count
+    if per > MAX_TWIST_PER_ELEMENT_DEG:
+        need = math.ceil(abs(twist) / MAX_TWIST_PER_ELEMENT_DEG)
+        raise SceneError(key, f"{count} {what} twist by {per:g} deg each (geometry.twist_deg = "
+                              f"{twist!r}), which nearly or fully degenerates their cross-"
+                              f"section; allowed: at least {need} {what}")
+
+
 def validate_for(method: str, scene: Scene) -> None:
     """What only ``method`` needs of the scene: a mesh whose elements do not degenerate and a
     modal basis no larger than the mesh."""
-    g = scene.geometry
     if method in ("ffrf", "gcms", "tlf"):
         nx, ny, nz = scene.mesh.solid
-        per = abs(g.twist_deg) / nx
-        if per > MAX_TWIST_PER_ELEMENT_DEG:
-            need = math.ceil(abs(g.twist_deg) / MAX_TWIST_PER_ELEMENT_DEG)
-            raise SceneError("mesh.solid", f"{nx} divisions along X twist each hexahedron by "
-                                           f"{per:g} deg (geometry.twist_deg = {g.twist_deg!r}), "
-                                           f"which nearly or fully degenerates it; allowed: at "
-                                           f"least {need} divisions along X")
+        _twist_per_element(scene, "mesh.solid", nx, "divisions along X")
         dof = 3 * nx * (ny + 1) * (nz + 1)
         modes = {"ffrf": scene.reduction.ffrf_modes, "gcms": scene.reduction.gcms_modes // 3}
         if method in modes and modes[method] > dof:
@@ -219,15 +223,8 @@ def validate_for(method: str, scene: Scene) -> None:
                                   f"{list(scene.mesh.solid)} has {dof} unknowns; allowed: at "
                                   f"most {dof if method == 'ffrf' else 3 * dof}")
     if method == "ancf":
-        n = scene.mesh.beam_elements
-        per = abs(g.twist_deg) / n
-        if per > MAX_TWIST_PER_ELEMENT_DEG:
-            need = math.ceil(abs(g.twist_deg) / MAX_TWIST_PER_ELEMENT_DEG)
-            raise SceneError("mesh.beam_elements", f"{n} ANCF elements twist by {per:g} deg "
-                                                   f"each (geometry.twist_deg = "
-                                                   f"{g.twist_deg!r}): their interpolated "
-                                                   f"cross-section degenerates; allowed: at least "
-                                                   f"{need} elements")
+        _twist_per_element(scene, "mesh.beam_elements", scene.mesh.beam_elements,
+                           "ANCF elements")
 
 
 def load_scene(path: str | os.PathLike | None = None, overrides: Iterable[str] = (),

@@ -38,7 +38,7 @@ def run(*args, cwd=None):
     (["run", "--method", "tlf", "--set", "mesh.solid=[1,2,2]", "--set",
       "geometry.twist_deg=180"], "at least 2 divisions along X"),
     (["run", "--method", "ancf", "--set", "mesh.beam_elements=1", "--set",
-      "geometry.twist_deg=-100"], "at least 2 elements"),
+      "geometry.twist_deg=-100"], "at least 2 ANCF elements"),
     (["run", "--method", "ffrf", "--set", "mesh.solid=[2,2,2]", "--set",
       "reduction.ffrf_modes=100"], "at most 54"),
     (["run", "--method", "lebb", "--checkpoint-every", "10"], "--checkpoint-every"),
