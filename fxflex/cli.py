@@ -248,6 +248,7 @@ def cmd_run(args, comm) -> None:
                                       load_checkpoint)
     from fxflex.io.series import prefix_digest
     from fxflex.time import Resume, diagnose, simulate
+    from fxflex.time.diagnosis import ab2_warning
 
     scene = _scene_from_args(args)
     options = BuildOptions(force_eval=args.force_eval, mass=args.mass, need_steady=False)
@@ -367,6 +368,12 @@ def cmd_run(args, comm) -> None:
             fields.close()
     progress.close(f"{res.steps} steps")
     diverged = diagnose(form, integrator, dt, res) if res.diverged else None
+    warnings = []
+    if diverged is None and integrator == "ab2":
+        note = ab2_warning(form, dt, res.t)
+        if note:
+            warnings.append(note)
+            log.warning(note)
     first = resume.step if resume else 0
     ckpt_info = None if checkpoint is None else {
         "path": checkpoint.path, "every": ckpt_every, "written": checkpoint.written,
@@ -374,7 +381,8 @@ def cmd_run(args, comm) -> None:
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        integrator=integrator, dt_s=dt, t_end_s=args.t_end, t_s=res.t,
                        steps=res.steps, tip_mm=tip_mm(res.tip), stable=None,
-                       diverged=diverged, series=os.path.abspath(out_path) if out_path else None,
+                       diverged=diverged, warnings=warnings,
+                       series=os.path.abspath(out_path) if out_path else None,
                        resumed_from_step=resume.step if resume else None,
                        checkpoint=ckpt_info,
                        timings_s={"preprocess": t_pre, "solve": res.wall_s},
@@ -390,6 +398,8 @@ def cmd_run(args, comm) -> None:
         text += (f"\n  STOPPED at t={diverged['time_s']:.6g} s: {diverged['cause']} -- "
                  f"{diverged['detail']}\n  (deflection above: the last finite check, "
                  f"t={res.t:.6g} s)")
+    for note in warnings:
+        text += f"\n  WARNING: {note}"
     if out_path:
         text += f"\n  series: {out_path}"
     if checkpoint is not None:

@@ -25,7 +25,8 @@ import numpy as np
 from fxflex.time import stability
 from fxflex.time.driver import SMALL_DEFORMATION_RANGE
 
-__all__ = ["diagnose", "ab2_growth_exponent", "measured_growth_rate", "AB2_LOG_GROWTH"]
+__all__ = ["diagnose", "ab2_growth_exponent", "measured_growth_rate", "ab2_warning",
+           "AB2_LOG_GROWTH"]
 
 #: AB2 counts as the cause when it amplifies the highest mode by more than exp(10) = 2.2e4 by the
 #: time of the stop: a mode excited at 1e-4 of the deflection limit or less reaches it
@@ -67,6 +68,25 @@ def measured_growth_rate(growth: np.ndarray | None, decades: float = 4.0) -> flo
     if abs(first - second) > 0.3 * slope:
         return None
     return float(slope)
+
+
+def ab2_warning(form, dt: float, t: float) -> str | None:
+    """For an AB2 run that reached t without stopping: a warning when AB2 amplified the highest
+    mode by more than exp(AB2_LOG_GROWTH) (exact root, w_max from ``omega_max()``): its output
+    may then carry a spurious high-frequency part too small to stop the run (docs/reduced.md:
+    GCMS at 0.5 us is 20x off after 10 ms without diverging). None otherwise."""
+    wmax_fn = getattr(form, "omega_max", None)
+    if not callable(wmax_fn):
+        return None
+    w = float(wmax_fn())
+    d = form.scene.damping.c / form.scene.material.rho
+    rate = stability.growth_rate("ab2", dt, w, d)
+    if rate * t <= AB2_LOG_GROWTH:
+        return None
+    limit = stability.critical_step("ab2", w, d, window=t, log_growth=1.0)
+    return (f"AB2 amplified the highest mode (w_max = {w:.4g} rad/s) by exp({rate * t:.3g}) over "
+            f"this run: the output may carry a spurious high-frequency part; dt < {limit:.3g} s "
+            f"keeps the growth below e over {t:.3g} s")
 
 
 def _physical(form) -> tuple[float, float] | None:

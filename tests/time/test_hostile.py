@@ -102,3 +102,18 @@ def test_distributed_tlf_stops_together_on_a_numerical_divergence(capsys, tmp_pa
     if MPI.COMM_WORLD.rank == 0:
         d = check_outputs(out, csv, T_END)
         assert d["diverged"]["cause"] == "numerical"
+
+
+@pytest.mark.serial
+def test_ab2_growth_that_does_not_stop_the_run_is_flagged(capsys):
+    """AB2 at 1.6 us on LEBB: the highest mode grows by e^28 in 1 ms, the load deflection ends
+    with the wrong sign, yet nothing leaves the range. The result says so; at the paper's 0.4 us
+    it does not."""
+    base = ["run", "--method", "lebb", "--t-end", "1e-3", "--json"]
+    assert main(base + ["--dt", "1.6e-6"]) == 0
+    bad = json.loads(capsys.readouterr().out)
+    assert main(base) == 0
+    good = json.loads(capsys.readouterr().out)
+    assert bad["diverged"] is None and len(bad["warnings"]) == 1
+    assert "exp(28" in bad["warnings"][0] and "dt < 6.2" in bad["warnings"][0]
+    assert good["warnings"] == [] and good["tip_mm"]["load"] < 0 < bad["tip_mm"]["load"]
