@@ -62,6 +62,7 @@ class FFRFInvariants:
     fe: np.ndarray          # Phi^T F: external load after the ramp
     b: np.ndarray           # Phi^T S^T F: torque of F about z per unit eta
     tip: np.ndarray         # (3, m) tip-centre displacement per unit eta
+    section: np.ndarray     # (6, m) tip-centre translation and tip-section rotation per unit eta
     J0: float               # int rho X0^T P X0
     s0: float               # (S X0) . F: torque of F about z on the undeformed body
 
@@ -79,7 +80,8 @@ def ffrf_invariants(model: SolidModel, data: MeshData, Phi: np.ndarray) -> FFRFI
     return FFRFInvariants(
         Lambda=0.5 * (Lam + Lam.T), G=0.5 * (G - G.T), N=0.5 * (N + N.T),
         g=inner(comm, Phi, data.f_S), n=inner(comm, Phi, data.f_c), fe=inner(comm, Phi, data.F),
-        b=inner(comm, Phi, nodal(S3.T, data.F)), tip=tip_rows(model, Phi), J0=data.J0,
+        b=inner(comm, Phi, nodal(S3.T, data.F)), tip=tip_rows(model, Phi),
+        section=model.tip_section(Phi), J0=data.J0,
         s0=data.load_torque)
 
 
@@ -101,7 +103,8 @@ class FFRF(ReducedFormulation):
         t1 = time.perf_counter()
         self.inv = inv = ffrf_invariants(self.model, self.data, Phi)
         self.dof = inv.Lambda.shape[0]
-        self.rot = RotatingSystem(K=inv.Lambda, G=inv.G, N=inv.N, f=inv.fe, n=inv.n, tip=inv.tip)
+        self.rot = RotatingSystem(K=inv.Lambda, G=inv.G, N=inv.N, f=inv.fe, n=inv.n, tip=inv.tip,
+                                  section=inv.section)
         self._build_operators()
         t2 = time.perf_counter()
         self.timings.update(invariants=t2 - t1, build=t2 - t0)

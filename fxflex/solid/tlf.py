@@ -71,6 +71,14 @@ KERNEL_FLAGS = ["-O2", "-march=native", "-fno-math-errno", "-fno-trapping-math",
 DEFAULT_MASS = "lumped"
 
 
+#: lowest eigenvalue pairs behind ``stable()`` and ``growth_rate()``
+STABILITY_PAIRS = 8
+#: a root counts as growing when Re lambda > this x max|lambda| of the computed roots: the PEP
+#: converges to a relative residual of 1e-10, so a purely imaginary root of the undamped system
+#: comes out with a real part of about that size
+PEP_STABILITY_RTOL = 1e-8
+
+
 def dof_count(scene: Scene) -> int:
     return solid_dof_count(scene)
 
@@ -169,6 +177,8 @@ class TLF:
         self.timings = dict(self.model.timings)
         self._dyn: _Dynamics | None = None
         self._omega_max: float | None = None
+        self._steady: SteadyState | None = None
+        self._modes: dict[int, tuple] = {}
         if not options.need_steady:
             self._dyn = _Dynamics(self)
         self.timings["build"] = time.perf_counter() - t0
@@ -181,7 +191,9 @@ class TLF:
 
     # -- Formulation interface --------------------------------------------------------------------
     def steady_state(self) -> SteadyState:
-        return tlf_steady(self.model)
+        if self._steady is None:
+            self._steady = tlf_steady(self.model)
+        return self._steady
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
         """u = 0, u' = phi'(0) S x0: the undeformed body in rigid rotation (NOTES.md)."""
@@ -266,6 +278,60 @@ class TLF:
         u.x.scatter_forward()
         R = forms.svk_residual(self.scene.material, u, self.model.u_test, self.model.dx)
         return self.model.matrix(ufl.derivative(R, u, self.model.u_trial), bcs=[])
+
+    # -- linearised motion about the steady state (SPEC section 6) --------------------------------
+    def linearise(self, steady: SteadyState | None = None) -> "Linearisation":
+        """(M, C, K) of the motion about the rotating equilibrium as PETSc matrices on the free
+        coordinates, with the mass in use (:mod:`fxflex.solid.rotating`). Collective."""
+        from fxflex.solid.rotating import tlf_linearisation
+
+        st = steady or self.steady_state()
+        sc = self.scene
+        return tlf_linearisation(self.model, st.q, sc.rotation.omega,
+                                 sc.damping.c / sc.material.rho, sc.damping.model == "absolute",
+                                 self.mass_kind)
+
+    def rotating_modes(self, pairs: int, steady: SteadyState | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """The ``pairs`` lowest roots of the linearised rotating system, one per conjugate pair,
+        lowest frequency first, and their mode vectors on this rank's free coordinates (SLEPc
+        PEP, :mod:`fxflex.analysis.petsc`). Collective; cached per ``pairs``."""
+        from fxflex.analysis.linear import conjugate_pairs
+        from fxflex.analysis.petsc import pep_eigen
+
+        if pairs not in self._modes:
+            lin = self.linearise(steady)
+            lam, X, _ = pep_eigen(lin.M, lin.C, lin.K, pairs)
+            keep = conjugate_pairs(lam)[:pairs]
+            lin.destroy()
+            self._modes[pairs] = (lam[keep], X[:, keep])
+        return self._modes[pairs]
+
+    def mode_tip(self, X: np.ndarray) -> np.ndarray:
+        """(6, k) tip translation and section rotation of mode vectors on the free coordinates
+        (:meth:`SolidModel.tip_section`). Collective."""
+        from fxflex.solid.rotating import free_entries
+
+        full = np.zeros((self.model.n_owned,) + X.shape[1:], dtype=X.dtype)
+        full[free_entries(self.model)] = X
+        return self.model.tip_section(full)
+
+    def eigenvalues(self, steady: SteadyState | None = None) -> np.ndarray:
+        """The STABILITY_PAIRS lowest roots: a rotating beam loses stability through its low
+        modes (a root through zero, or low modes merging), never through the high ones, which the
+        relative damping damps at -c/(2 rho) and the rotation hardly touches."""
+        return self.rotating_modes(STABILITY_PAIRS, steady)[0]
+
+    def growth_rate(self) -> tuple[float, float]:
+        """(Re lambda, |Im lambda|) of the rightmost of the lowest roots (1/s, rad/s)."""
+        from fxflex.analysis.linear import rightmost
+        return rightmost(self.eigenvalues())
+
+    def stable(self, steady: SteadyState | None = None) -> bool:
+        """No growing root among the lowest (:func:`fxflex.analysis.linear.unstable`, with the
+        PEP's own tolerance)."""
+        from fxflex.analysis.linear import unstable
+        return not unstable(self.eigenvalues(steady), rtol=PEP_STABILITY_RTOL)
 
     # -- pieces -----------------------------------------------------------------------------------
     def internal_force(self, q: np.ndarray) -> np.ndarray:
@@ -353,7 +419,7 @@ class _Dynamics:
         t1 = time.perf_counter()
         self.mass = tlf.mass_kind
         if self.mass == "lumped":
-            m = _owned(model.vector(_lumped_mass_form(model), zero_clamped=False), n)
+            m = _owned(model.vector(model.lumped_mass_form(), zero_clamped=False), n)
             self.m_inv = 1.0 / m
         else:
             Mf = model.compile(model.mass_form())
@@ -438,12 +504,6 @@ def _scalar_mass(model: SolidModel) -> PETSc.Mat:
     return model.matrix(fem.form(model.rho * u * v * model.dx), bcs=[bc])
 
 
-def _lumped_mass_form(model: SolidModel):
-    """Row sums of the consistent mass (Eq. 29): int rho N_a, per component."""
-    ones = fem.Constant(model.mesh, np.ones(3))
-    return model.rho * ufl.inner(ones, model.u_test) * model.dx
-
-
 def largest_frequency(model: SolidModel, mass: str, *, tol: float = 1e-8) -> float:
     """w_max = sqrt(lambda_max) of K_L x = lambda M x on the free coordinates (SLEPc).
 
@@ -456,7 +516,7 @@ def largest_frequency(model: SolidModel, mass: str, *, tol: float = 1e-8) -> flo
     K = model.matrix(model.compile(model.stiffness_form()))
     eps = SLEPc.EPS().create(model.comm)
     if mass == "lumped":
-        m = model.vector(_lumped_mass_form(model), zero_clamped=False)
+        m = model.vector(model.lumped_mass_form(), zero_clamped=False)
         owned = m.getArray()                       # ghost slots are not used by the scaling
         owned[:] = 1.0 / np.sqrt(owned)
         owned[(3 * model.root_owned[:, None] + np.arange(3)).reshape(-1)] = 1.0
