@@ -188,8 +188,17 @@ def plot_campbell(data: CampbellData, path: str) -> None:
     fig, ax = plt.subplots(figsize=(7.5, 5.0))
     for lo, hi in data.unstable_ranges():
         ax.axvspan(lo, hi, color="tab:red", alpha=0.15, lw=0)
-    for j in range(f.shape[1]):
-        ax.plot(data.rpm, f[:, j], color="0.75", lw=0.8, zorder=1)
+    # thin lines join the j-th lowest mode of each direction from speed to speed; past a
+    # divergence speed an oscillating pair becomes two real roots +-a (0 Hz), of which only the
+    # growing one continues the branch, so that the count stays aligned
+    for lab in LABELS:
+        branch = np.full_like(f, np.nan)
+        for i in range(f.shape[0]):
+            row = [f[i, j] for j in range(f.shape[1])
+                   if labels[i][j] == lab and (f[i, j] > 0 or g[i, j] > 0)]
+            branch[i, : len(row)] = row
+        for j in range(branch.shape[1]):
+            ax.plot(data.rpm, branch[:, j], color=_COLOURS[lab], alpha=0.4, lw=0.8, zorder=1)
     seen = set()
     for i, rpm in enumerate(data.rpm):
         for j, lab in enumerate(labels[i]):
