@@ -108,14 +108,24 @@ def tlf_linearisation(model: SolidModel, U: np.ndarray, omega: float, c_rho: flo
 
     eye = np.eye(3)
     M = coupling(eye)
-    C = coupling(2.0 * omega * S3 + c_rho * eye)
+
+    def coupling_or_zero(B: np.ndarray) -> PETSc.Mat:
+        if B.any():
+            return coupling(B)
+        Z = M.duplicate()                         # UFL drops a zero form: nothing to assemble
+        Z.zeroEntries()
+        return Z
+
+    C = coupling_or_zero(2.0 * omega * S3 + c_rho * eye)
     u = fem.Function(model.V)
     u.x.array[: model.n_owned] = U
     u.x.scatter_forward()
     residual = forms.svk_residual(model.scene.material, u, model.u_test, model.dx)
     K = sub(ufl.derivative(residual, u, model.u_trial))
-    inertia = coupling(-omega**2 * P3 + (c_rho * omega if absolute else 0.0) * S3)
-    K.axpy(1.0, inertia, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-    inertia.destroy()
+    B = -omega**2 * P3 + (c_rho * omega if absolute else 0.0) * S3
+    if B.any():
+        inertia = coupling(B)
+        K.axpy(1.0, inertia, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        inertia.destroy()
     rows.destroy()
     return Linearisation(M=M, C=C, K=K, free=free, n_owned=model.n_owned)

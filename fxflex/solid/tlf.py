@@ -30,7 +30,8 @@ Steady state (SPEC section 6, NOTES.md): in the rotating frame, with U = A^T x -
 
 St.Venant-Kirchhoff material, the centrifugal load acting on the deformed position, solved by
 Newton's method with the Jacobian from ``ufl.derivative`` (geometric stiffness and spin softening
-included). Above the speed where the unstressed K_L - Omega^2 M_P loses definiteness the first
+included). The absolute damping model adds its circulatory (c/rho) Omega int rho (S U) . dU (Eq. 68
+seen from the hub, SPEC section 5), non-symmetric: Newton then factorises with LU. Above the speed where the unstressed K_L - Omega^2 M_P loses definiteness the first
 Newton step would follow the unstable linear mode, so the speed is raised in stages (continuation
 in Omega^2), each stage starting from the previous equilibrium.
 """
@@ -93,6 +94,11 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
     w2 = fem.Constant(model.mesh, 0.0)
     R = (forms.svk_residual(model.scene.material, U, v, model.dx)
          - w2 * forms.centrifugal(model.rho, model.X0 + U, v, model.dx))
+    damping = model.scene.damping
+    absolute = damping.model == "absolute" and damping.c > 0
+    if absolute:                    # the circulatory (c/rho) Omega M_S U of Eq. 68 (SPEC 5)
+        w1 = fem.Constant(model.mesh, 0.0)
+        R = R + w1 * (damping.c / model.rho) * forms.mass_S(model.rho, U, v, model.dx)
     J = ufl.derivative(R, U, du)
     F_ext = model.rotating_load()
     t_setup = time.perf_counter() - t0
@@ -101,7 +107,10 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
     timings = {"setup": t_setup, "assemble": 0.0, "factor_solve": 0.0}
     for k in range(1, stages + 1):
         w2.value = omega**2 * k / stages
-        res = newton(R, J, U, [model.bc], rhs=F_ext, rtol=rtol, max_it=max_it)
+        if absolute:
+            w1.value = math.sqrt(w2.value)
+        res = newton(R, J, U, [model.bc], rhs=F_ext, rtol=rtol, max_it=max_it,
+                     symmetric=not absolute)
         residuals = res.residuals
         iterations += res.iterations
         for key in ("assemble", "factor_solve"):
