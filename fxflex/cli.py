@@ -291,9 +291,11 @@ def cmd_run(args, comm) -> None:
             fields.close()
     progress.close(f"{res.steps} steps")
     diverged = diagnose(form, integrator, dt, res) if res.diverged else None
+    stable_fn = getattr(form, "stable", None)     # of the equilibrium at the final speed
+    verdict = stable_fn() if callable(stable_fn) else None
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        integrator=integrator, dt_s=dt, t_end_s=args.t_end, t_s=res.t,
-                       steps=res.steps, tip_mm=tip_mm(res.tip), stable=None,
+                       steps=res.steps, tip_mm=tip_mm(res.tip), stable=verdict,
                        diverged=diverged, series=os.path.abspath(args.out) if args.out else None,
                        timings_s={"preprocess": t_pre, "solve": res.wall_s},
                        detail_timings_s=form.timings)
