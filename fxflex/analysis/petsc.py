@@ -15,6 +15,8 @@ import numpy as np
 from petsc4py import PETSc
 from slepc4py import SLEPc
 
+from fxflex.solid.petsc import make_direct
+
 __all__ = ["pep_eigen"]
 
 
@@ -37,11 +39,7 @@ def pep_eigen(M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, pairs: int, *, target: f
     pep.setWhichEigenpairs(SLEPc.PEP.Which.TARGET_MAGNITUDE)
     st = pep.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
-    ksp = st.getKSP()
-    ksp.setType("preonly")
-    pc = ksp.getPC()
-    pc.setType("lu")
-    pc.setFactorSolverType("mumps")
+    make_direct(st.getKSP(), symmetric=False)
     pep.setTolerances(tol, 200)
     pep.solve()
     nconv = pep.getConverged()

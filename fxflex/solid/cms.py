@@ -25,6 +25,7 @@ from petsc4py import PETSc
 from slepc4py import SLEPc
 
 from fxflex.solid.model import SolidModel
+from fxflex.solid.petsc import make_direct
 
 __all__ = ["ClampedModes", "clamped_modes", "mass_and_stiffness"]
 
@@ -81,11 +82,7 @@ def clamped_modes(model: SolidModel, count: int, *, K: PETSc.Mat | None = None,
     st = eps.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
     st.setShift(0.0)
-    ksp = st.getKSP()
-    ksp.setType("preonly")
-    pc = ksp.getPC()
-    pc.setType("cholesky")
-    pc.setFactorSolverType("mumps")
+    make_direct(st.getKSP())
     eps.setTolerances(tol, 500)
     eps.solve()
     nconv = eps.getConverged()

@@ -52,7 +52,7 @@ from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import rotation_z
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel, solid_dof_count
-from fxflex.solid.petsc import direct_solver, newton
+from fxflex.solid.petsc import direct_solver, make_direct, newton
 
 __all__ = ["TLF", "UflForce", "FieldWriter", "build", "dof_count", "tlf_steady", "largest_frequency",
            "DEFAULT_MASS"]
@@ -538,10 +538,7 @@ def largest_frequency(model: SolidModel, mass: str, *, tol: float = 1e-8) -> flo
         eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
         st = eps.getST()
         st.setType(SLEPc.ST.Type.SHIFT)
-        ksp = st.getKSP()
-        ksp.setType("preonly")
-        ksp.getPC().setType("cholesky")
-        ksp.getPC().setFactorSolverType("mumps")
+        make_direct(st.getKSP())
     eps.setType(SLEPc.EPS.Type.KRYLOVSCHUR)
     eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
     eps.setDimensions(nev=1, ncv=64)
