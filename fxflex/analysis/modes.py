@@ -25,7 +25,7 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -45,9 +45,8 @@ class Modes:
     eigenvalues: np.ndarray         # (k,) complex, Im >= 0
     tip: np.ndarray                 # (6, k) complex tip translation and rotation per mode
     labels: list[str]
-    stable: bool                    # no growing root among the computed ones
+    stable: bool                    # the formulation's verdict (stable())
     seconds: float = 0.0
-    extra: dict = field(default_factory=dict)
 
     @property
     def frequencies_hz(self) -> np.ndarray:

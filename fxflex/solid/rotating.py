@@ -46,12 +46,6 @@ class Linearisation:
     free: np.ndarray            # owned-entry index of each local free coordinate
     n_owned: int
 
-    def to_owned(self, X: np.ndarray) -> np.ndarray:
-        """Free-coordinate arrays (n_free_local, ...) to owned-entry arrays, zero on the clamp."""
-        out = np.zeros((self.n_owned,) + X.shape[1:], dtype=X.dtype)
-        out[self.free] = X
-        return out
-
     def destroy(self) -> None:
         for A in (self.M, self.C, self.K):
             A.destroy()

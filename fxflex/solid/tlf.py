@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 import ufl
@@ -53,6 +54,9 @@ from fxflex.scene.kinematics import rotation_z
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel, solid_dof_count
 from fxflex.solid.petsc import direct_solver, make_direct, newton
+
+if TYPE_CHECKING:
+    from fxflex.solid.rotating import Linearisation
 
 __all__ = ["TLF", "UflForce", "FieldWriter", "build", "dof_count", "tlf_steady", "largest_frequency",
            "DEFAULT_MASS"]
@@ -187,7 +191,7 @@ class TLF:
         self._dyn: _Dynamics | None = None
         self._omega_max: float | None = None
         self._steady: SteadyState | None = None
-        self._modes: dict[int, tuple] = {}
+        self._modes: tuple[np.ndarray, np.ndarray] | None = None
         if not options.need_steady:
             self._dyn = _Dynamics(self)
         self.timings["build"] = time.perf_counter() - t0
@@ -289,7 +293,7 @@ class TLF:
         return self.model.matrix(ufl.derivative(R, u, self.model.u_trial), bcs=[])
 
     # -- linearised motion about the steady state (SPEC section 6) --------------------------------
-    def linearise(self, steady: SteadyState | None = None) -> "Linearisation":
+    def linearise(self, steady: SteadyState | None = None) -> Linearisation:
         """(M, C, K) of the motion about the rotating equilibrium as PETSc matrices on the free
         coordinates, with the mass in use (:mod:`fxflex.solid.rotating`). Collective."""
         from fxflex.solid.rotating import tlf_linearisation
@@ -304,17 +308,20 @@ class TLF:
                        ) -> tuple[np.ndarray, np.ndarray]:
         """The ``pairs`` lowest roots of the linearised rotating system, one per conjugate pair,
         lowest frequency first, and their mode vectors on this rank's free coordinates (SLEPc
-        PEP, :mod:`fxflex.analysis.petsc`). Collective; cached per ``pairs``."""
+        PEP, :mod:`fxflex.analysis.petsc`). Collective. At least STABILITY_PAIRS are computed
+        and kept, so that ``stable()`` after it costs nothing."""
         from fxflex.analysis.linear import conjugate_pairs
         from fxflex.analysis.petsc import pep_eigen
 
-        if pairs not in self._modes:
+        if self._modes is None or self._modes[0].size < pairs:
+            count = max(pairs, STABILITY_PAIRS)
             lin = self.linearise(steady)
-            lam, X, _ = pep_eigen(lin.M, lin.C, lin.K, pairs)
-            keep = conjugate_pairs(lam)[:pairs]
+            lam, X, _ = pep_eigen(lin.M, lin.C, lin.K, count)
+            keep = conjugate_pairs(lam)[:count]
             lin.destroy()
-            self._modes[pairs] = (lam[keep], X[:, keep])
-        return self._modes[pairs]
+            self._modes = (lam[keep], X[:, keep])
+        lam, X = self._modes
+        return lam[:pairs], X[:, :pairs]
 
     def mode_tip(self, X: np.ndarray) -> np.ndarray:
         """(6, k) tip translation and section rotation of mode vectors on the free coordinates
@@ -327,8 +334,8 @@ class TLF:
 
     def eigenvalues(self, steady: SteadyState | None = None) -> np.ndarray:
         """The STABILITY_PAIRS lowest roots: a rotating beam loses stability through its low
-        modes (a root through zero, or low modes merging), never through the high ones, which the
-        relative damping damps at -c/(2 rho) and the rotation hardly touches."""
+        modes (a root through zero, or low modes merging); the high ones are damped at about
+        -c/(2 rho) and hardly moved by the rotation."""
         return self.rotating_modes(STABILITY_PAIRS, steady)[0]
 
     def growth_rate(self) -> tuple[float, float]:
