@@ -126,6 +126,23 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--sample-dt", type=_positive("--sample-dt"), metavar="DT",
                    help="output interval (s); default max(dt, t_end/20000)")
     _common(p)
+
+    p = sub.add_parser("modes", help="modes and stability of the motion about the rotating "
+                                     "steady state; Campbell diagram")
+    p.add_argument("--method", type=_method, required=True, help=" | ".join(METHODS))
+    _physics(p)
+    p.add_argument("--n", type=int, default=10, metavar="N",
+                   help="number of modes (conjugate pairs), lowest frequency first; default 10")
+    p.add_argument("--campbell", metavar="RPM_MIN:RPM_MAX:COUNT",
+                   help="modes at COUNT speeds from RPM_MIN to RPM_MAX: Campbell diagram (PNG) "
+                        "with the 1x, 2x rotation lines and unstable ranges shaded, CSV, JSON")
+    p.add_argument("--mass", choices=("consistent", "lumped"),
+                   help="tlf mass matrix (default: as for run)")
+    p.add_argument("--out", metavar="DIR",
+                   help="output folder (default out/modes with --campbell; without it, write "
+                        "modes_<method>.json there only if given)")
+    _common(p)
+
     p = sub.add_parser("compare", help="the paper's comparison: every method at the three "
                                        "paper speeds, next to the paper's figures")
     p.add_argument("--methods", type=_method_list, default=list(METHODS), metavar="M,...",
@@ -292,9 +309,11 @@ def cmd_run(args, comm) -> None:
             fields.close()
     progress.close(f"{res.steps} steps")
     diverged = diagnose(form, integrator, dt, res) if res.diverged else None
+    stable_fn = getattr(form, "stable", None)     # of the equilibrium at the final speed
+    verdict = stable_fn() if callable(stable_fn) else None
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        integrator=integrator, dt_s=dt, t_end_s=args.t_end, t_s=res.t,
-                       steps=res.steps, tip_mm=tip_mm(res.tip), stable=None,
+                       steps=res.steps, tip_mm=tip_mm(res.tip), stable=verdict,
                        diverged=diverged, series=os.path.abspath(args.out) if args.out else None,
                        timings_s={"preprocess": t_pre, "solve": res.wall_s},
                        detail_timings_s=form.timings)
@@ -307,6 +326,21 @@ def cmd_run(args, comm) -> None:
                  f"{diverged['detail']}")
     if args.out:
         text += f"\n  series: {args.out}"
+    _emit(comm, args, payload, text)
+
+
+def cmd_modes(args, comm) -> None:
+    from fxflex.analysis.modes import run_modes
+    from fxflex.formulation import BuildOptions, check_options
+
+    scene = _scene_from_args(args)
+    options = BuildOptions(mass=args.mass)
+    check_options(args.method, options)
+    if args.n < 1:
+        raise FxflexError(f"--n: must be >= 1, got {args.n}")
+    out_dir = args.out or ("out/modes" if args.campbell else None)
+    payload, text = run_modes(args.method, scene, comm, options, args.n, args.campbell,
+                              os.path.abspath(out_dir) if out_dir else None)
     _emit(comm, args, payload, text)
 
 
@@ -387,8 +421,8 @@ def cmd_cache(args, comm) -> None:
     _emit(comm, args, payload, "\n".join(lines))
 
 
-COMMANDS = {"cache": cmd_cache, "info": cmd_info, "steady": cmd_steady, "run": cmd_run, "compare": cmd_compare,
-            "bench": cmd_bench}
+COMMANDS = {"cache": cmd_cache, "info": cmd_info, "steady": cmd_steady, "run": cmd_run,
+            "modes": cmd_modes, "compare": cmd_compare, "bench": cmd_bench}
 
 
 def _quiet_logs() -> None:
