@@ -135,6 +135,23 @@ def make_parser() -> argparse.ArgumentParser:
                    help="continue the run a checkpoint belongs to (same scene and run options): "
                         "the series is cut back to the checkpoint and appended")
     _common(p)
+
+    p = sub.add_parser("modes", help="modes and stability of the motion about the rotating "
+                                     "steady state; Campbell diagram")
+    p.add_argument("--method", type=_method, required=True, help=" | ".join(METHODS))
+    _physics(p)
+    p.add_argument("--n", type=int, default=10, metavar="N",
+                   help="number of modes (conjugate pairs), lowest frequency first; default 10")
+    p.add_argument("--campbell", metavar="RPM_MIN:RPM_MAX:COUNT",
+                   help="modes at COUNT speeds from RPM_MIN to RPM_MAX: Campbell diagram (PNG) "
+                        "with the 1x, 2x rotation lines and unstable ranges shaded, CSV, JSON")
+    p.add_argument("--mass", choices=("consistent", "lumped"),
+                   help="tlf mass matrix (default: as for run)")
+    p.add_argument("--out", metavar="DIR",
+                   help="output folder (default out/modes with --campbell; without it, write "
+                        "modes_<method>.json there only if given)")
+    _common(p)
+
     p = sub.add_parser("compare", help="the paper's comparison: every method at the three "
                                        "paper speeds, next to the paper's figures")
     p.add_argument("--methods", type=_method_list, default=list(METHODS), metavar="M,...",
@@ -374,13 +391,15 @@ def cmd_run(args, comm) -> None:
         if note:
             warnings.append(note)
             log.warning(note)
+    stable_fn = getattr(form, "stable", None)     # of the equilibrium at the final speed
+    verdict = stable_fn() if callable(stable_fn) else None
     first = resume.step if resume else 0
     ckpt_info = None if checkpoint is None else {
         "path": checkpoint.path, "every": ckpt_every, "written": checkpoint.written,
         "seconds": checkpoint.seconds}
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        integrator=integrator, dt_s=dt, t_end_s=args.t_end, t_s=res.t,
-                       steps=res.steps, tip_mm=tip_mm(res.tip), stable=None,
+                       steps=res.steps, tip_mm=tip_mm(res.tip), stable=verdict,
                        diverged=diverged, warnings=warnings,
                        series=os.path.abspath(out_path) if out_path else None,
                        resumed_from_step=resume.step if resume else None,
@@ -404,6 +423,21 @@ def cmd_run(args, comm) -> None:
         text += f"\n  series: {out_path}"
     if checkpoint is not None:
         text += f"\n  checkpoints: {checkpoint.written} written to {checkpoint.path}"
+    _emit(comm, args, payload, text)
+
+
+def cmd_modes(args, comm) -> None:
+    from fxflex.analysis.modes import run_modes
+    from fxflex.formulation import BuildOptions, check_options
+
+    scene = _scene_from_args(args)
+    options = BuildOptions(mass=args.mass)
+    check_options(args.method, options)
+    if args.n < 1:
+        raise FxflexError(f"--n: must be >= 1, got {args.n}")
+    out_dir = args.out or ("out/modes" if args.campbell else None)
+    payload, text = run_modes(args.method, scene, comm, options, args.n, args.campbell,
+                              os.path.abspath(out_dir) if out_dir else None)
     _emit(comm, args, payload, text)
 
 
@@ -484,8 +518,8 @@ def cmd_cache(args, comm) -> None:
     _emit(comm, args, payload, "\n".join(lines))
 
 
-COMMANDS = {"cache": cmd_cache, "info": cmd_info, "steady": cmd_steady, "run": cmd_run, "compare": cmd_compare,
-            "bench": cmd_bench}
+COMMANDS = {"cache": cmd_cache, "info": cmd_info, "steady": cmd_steady, "run": cmd_run,
+            "modes": cmd_modes, "compare": cmd_compare, "bench": cmd_bench}
 
 
 def _quiet_logs() -> None:

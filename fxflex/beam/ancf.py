@@ -29,9 +29,10 @@ import scipy.sparse as sp
 from scipy.sparse import _sparsetools
 
 from fxflex.beam.elements import ANCF_SLOTS, ancf_tables, gauss
+from fxflex.analysis.linear import DenseStability
 from fxflex.beam.invariants import GramChain, _matvec
 from fxflex.beam.line import beam_line
-from fxflex.beam.linear import growth_rate, newton, omega_max
+from fxflex.beam.linear import newton, omega_max
 from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
@@ -96,7 +97,7 @@ def _voigt_pairs(nx: np.ndarray) -> np.ndarray:
     return np.stack(out, axis=-3)
 
 
-class ANCF:
+class ANCF(DenseStability):
     """Second-order ANCF beam in the inertial frame; see the module docstring."""
 
     method = "ancf"
@@ -367,11 +368,22 @@ class ANCF:
         C = 2 * omega * np.kron(self.Ms, S3)[f] + self.c_rho * M
         return M, C, self._effective_stiffness(e, omega)
 
-    def growth_rate(self) -> tuple[float, float]:
-        return growth_rate(*self.linearise())
-
-    def stable(self, steady: SteadyState | None = None) -> bool:
-        return self.growth_rate()[0] <= 0.0
+    def mode_tip(self, X: np.ndarray) -> np.ndarray:
+        """(6, k) tip translation and small section rotation of rotating-frame mode vectors X
+        (free coordinates, k columns). The translation is the tip node's position r; the rotation
+        theta follows from the gradients' changes, delta d = theta x d for a rigid section: the
+        axial gradient d_X = e_X gives theta_Y = -delta d_X,z and theta_Z = delta d_X,y, the two
+        section gradients d_Y, d_Z (orthogonal, in the section plane) give
+        theta_X = 1/2 sum_k (d_k x delta d_k)_X / |d_k|^2."""
+        tip = X[-DPN:].reshape(SLOTS, 3, -1)             # the free end: every slot is free
+        d = self.e0n[-1]
+        out = np.empty((6, tip.shape[2]), dtype=X.dtype)
+        out[:3] = tip[0]
+        out[3] = 0.5 * sum((d[k, 1] * tip[k, 2] - d[k, 2] * tip[k, 1]) / (d[k] @ d[k])
+                           for k in (2, 3))
+        out[4] = -tip[1, 2]
+        out[5] = tip[1, 1]
+        return out
 
     def omega_max(self) -> float:
         """Highest circular frequency of the clamped beam at rest (K_L, M on the free

@@ -31,7 +31,8 @@ import numpy as np
 
 from fxflex.beam.elements import lebb_tables
 from fxflex.beam.line import beam_line
-from fxflex.beam.linear import growth_rate, newton, omega_max
+from fxflex.analysis.linear import DenseStability
+from fxflex.beam.linear import newton, omega_max
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
@@ -98,7 +99,7 @@ def _assemble(blocks: np.ndarray, n_full: int, dpn: int) -> np.ndarray:
     return out
 
 
-class FloatingFrameBeam:
+class FloatingFrameBeam(DenseStability):
     """LEBB (and, with a nonlinear force, NEBB) in the floating frame; see the module docstring."""
 
     extra_columns = ("drive_torque_Nm",)
@@ -309,14 +310,10 @@ class FloatingFrameBeam:
         C = 2 * omega * self.G + self.c_rho * self.M
         return self.M.copy(), C, self._stiffness(W, omega)
 
-    def growth_rate(self) -> tuple[float, float]:
-        """Largest real part of the eigenvalues of the linearised rotating system and the
-        |imaginary part| of that root (1/s, rad/s)."""
-        return growth_rate(*self.linearise())
-
-    def stable(self, steady: SteadyState | None = None) -> bool:
-        """True when no eigenvalue of the linearised system has a positive real part."""
-        return self.growth_rate()[0] <= 0.0
+    def mode_tip(self, X: np.ndarray) -> np.ndarray:
+        """(6, k) tip translation and rotation of mode vectors X (dof, k): the free-end node's
+        W_X, W_Y, W_Z, theta_X, theta_Y, theta_Z (O-XYZ)."""
+        return X[-6:]
 
     def omega_max(self) -> float:
         """Highest circular frequency of the clamped beam at rest, sqrt(max eig(K_L, M))."""

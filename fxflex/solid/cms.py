@@ -113,6 +113,8 @@ def clamped_modes(model: SolidModel, count: int, *, K: PETSc.Mat | None = None,
 def _solve(model: SolidModel, count: int, K, M, tol: float) -> ClampedModes:
     from slepc4py import SLEPc
 
+    from fxflex.solid.petsc import make_direct
+
     t0 = time.perf_counter()
     if K is None or M is None:
         K, M = mass_and_stiffness(model)
@@ -126,11 +128,7 @@ def _solve(model: SolidModel, count: int, K, M, tol: float) -> ClampedModes:
     st = eps.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
     st.setShift(0.0)
-    ksp = st.getKSP()
-    ksp.setType("preonly")
-    pc = ksp.getPC()
-    pc.setType("cholesky")
-    pc.setFactorSolverType("mumps")
+    make_direct(st.getKSP())
     eps.setTolerances(tol, 500)
     eps.solve()
     nconv = eps.getConverged()

@@ -65,6 +65,7 @@ class FFRFInvariants:
     fe: np.ndarray          # Phi^T F: external load after the ramp
     b: np.ndarray           # Phi^T S^T F: torque of F about z per unit eta
     tip: np.ndarray         # (3, m) tip-centre displacement per unit eta
+    section: np.ndarray     # (6, m) tip-centre translation and tip-section rotation per unit eta
     J0: float               # int rho X0^T P X0
     s0: float               # (S X0) . F: torque of F about z on the undeformed body
 
@@ -82,7 +83,8 @@ def ffrf_invariants(model: SolidModel, data: MeshData, Phi: np.ndarray) -> FFRFI
     return FFRFInvariants(
         Lambda=0.5 * (Lam + Lam.T), G=0.5 * (G - G.T), N=0.5 * (N + N.T),
         g=inner(comm, Phi, data.f_S), n=inner(comm, Phi, data.f_c), fe=inner(comm, Phi, data.F),
-        b=inner(comm, Phi, nodal(S3.T, data.F)), tip=tip_rows(model, Phi), J0=data.J0,
+        b=inner(comm, Phi, nodal(S3.T, data.F)), tip=tip_rows(model, Phi),
+        section=model.tip_section(Phi), J0=data.J0,
         s0=data.load_torque)
 
 
@@ -105,7 +107,8 @@ class FFRF(ReducedFormulation):
         key = reduced_key(scene, "ffrf", count) if cached else None
         self.inv = inv = self._projections(key, FFRFInvariants, ffrf_invariants)
         self.dof = inv.Lambda.shape[0]
-        self.rot = RotatingSystem(K=inv.Lambda, G=inv.G, N=inv.N, f=inv.fe, n=inv.n, tip=inv.tip)
+        self.rot = RotatingSystem(K=inv.Lambda, G=inv.G, N=inv.N, f=inv.fe, n=inv.n, tip=inv.tip,
+                                  section=inv.section)
         self._build_operators()
         self.timings["build"] = time.perf_counter() - t0
 

@@ -131,6 +131,7 @@ class GlobalModes:
     QS: np.ndarray              # Psi~^T S_d F
     Q3: np.ndarray              # Psi~^T G3_d F
     tip: np.ndarray             # (3, r): inertial tip displacement per unit xi
+    section: np.ndarray         # (6, r): tip translation and tip-section rotation per unit xi
     J0: float
     s0: float
 
@@ -165,6 +166,7 @@ def global_modes(model: SolidModel, data: MeshData, Phi: np.ndarray, tol: float)
         T=T, gram=mus, kept=kept, K9=K9, J=0.5 * (J - J.T), MP=Wt @ C["P"] @ T,
         MG3=Wt @ C["G3"] @ T, wS=proj(data.f_S), wP=proj(data.f_c), QP=proj(nodal(P3, data.F)),
         QS=proj(nodal(S3, data.F)), Q3=proj(nodal(G3, data.F)), tip=tip_rows(model, Psi) @ T,
+        section=model.tip_section(Psi) @ T,
         J0=data.J0, s0=data.load_torque)
 
 
@@ -197,7 +199,7 @@ class GCMS(ReducedFormulation):
         self.Kc1, self.Ks1 = K[0, 2] + K[2, 0], K[1, 2] + K[2, 1]
         self.Kc2, self.Ks2 = 0.5 * (K[0, 0] - K[1, 1]), 0.5 * (K[0, 1] + K[1, 0])
         self.rot = RotatingSystem(K=self.stiffness(0.0), G=gm.J, N=-gm.J @ gm.J,
-                                  f=gm.QP + gm.Q3, n=gm.wP, tip=gm.tip)
+                                  f=gm.QP + gm.Q3, n=gm.wP, tip=gm.tip, section=gm.section)
         # relative damping's (c/rho) phi' J xi: one more weighted block, folded into K0 at
         # constant speed
         self._J_block = not self.absolute and not self.constant_speed

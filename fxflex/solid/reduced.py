@@ -49,7 +49,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fxflex import cache
-from fxflex.beam.linear import companion_eigenvalues
+from fxflex.analysis.linear import DenseStability
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
 
@@ -92,10 +92,7 @@ def inner(comm, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
 
 def tip_rows(model: SolidModel, X: np.ndarray) -> np.ndarray:
     """(3, k): the tip-centre displacement of each column of X, on every rank."""
-    local = np.zeros((3,) + X.shape[1:])
-    if model.tip_node is not None:
-        local[:] = X[3 * model.tip_node: 3 * model.tip_node + 3]
-    return model.comm.allreduce(local)
+    return model.tip_displacement(X)
 
 
 @dataclass
@@ -204,9 +201,10 @@ class RotatingSystem:
     f: np.ndarray       # external load after the ramp
     n: np.ndarray       # centrifugal load per unit Omega^2
     tip: np.ndarray     # (3, k): tip-centre deflection in O-XYZ per unit z
+    section: np.ndarray  # (6, k): tip-centre translation and tip-section rotation per unit z
 
 
-class ReducedFormulation:
+class ReducedFormulation(DenseStability):
     """Common part of FFRF and GCMS: state layout, linearisation, eigenvalues, steady state.
 
     Subclasses set ``dof``, ``rot`` (:class:`RotatingSystem`) and the three operators of
@@ -226,7 +224,6 @@ class ReducedFormulation:
         # at rest (0 rpm) a spin-up is no spin-up: every rotation term is identically zero
         self.constant_speed = scene.rotation.profile == "constant" or self.drive.at_rest
         self.timings: dict[str, float] = {}
-        self._eig = None
 
     # -- Formulation interface ---------------------------------------------------------------
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -279,17 +276,10 @@ class ReducedFormulation:
         rotating frame already)."""
         return q, v
 
-    def eigenvalues(self) -> np.ndarray:
-        """Eigenvalues of the linearised rotating system (SPEC section 6, Eq. 59-64)."""
-        if self._eig is None:
-            self._eig = companion_eigenvalues(*self.linearise())
-        return self._eig
-
-    def growth_rate(self) -> tuple[float, float]:
-        """(Re lambda_max, |Im lambda| of that root) of the linearised rotating system."""
-        lam = self.eigenvalues()
-        i = int(np.argmax(lam.real))
-        return float(lam[i].real), float(abs(lam[i].imag))
+    def mode_tip(self, X: np.ndarray) -> np.ndarray:
+        """(6, k) tip translation and rotation (O-XYZ) of rotating-frame mode vectors X (k, ...)
+        in the coordinates z of :class:`RotatingSystem`."""
+        return self.rot.section @ X
 
     def omega_max(self) -> float:
         """Highest circular frequency max |lambda| of the linearised rotating system (rad/s)."""
@@ -305,11 +295,6 @@ class ReducedFormulation:
         rate = np.log(ab2_root(dt * lam)) / dt
         i = int(np.argmax(rate))
         return float(rate[i]), float(abs(lam[i]))
-
-    def stable(self, steady: SteadyState | None = None) -> bool:
-        """No eigenvalue with positive real part (beyond round-off of the eigensolver)."""
-        rate, _ = self.growth_rate()
-        return bool(rate <= 1e-9 * self.omega_max())
 
     def steady_state(self) -> SteadyState:
         """(K_r - Omega^2 N_r [+ (c/rho) Omega G_r]) z = f_r + Omega^2 n_r at the scene's speed

@@ -25,8 +25,8 @@ import numpy as np
 from fxflex.time import stability
 from fxflex.time.driver import SMALL_DEFORMATION_RANGE
 
-__all__ = ["diagnose", "ab2_growth_exponent", "measured_growth_rate", "ab2_warning",
-           "AB2_LOG_GROWTH"]
+__all__ = ["diagnose", "ab2_growth_exponent", "measured_growth_rate", "deviation_growth",
+           "ab2_warning", "AB2_LOG_GROWTH"]
 
 #: AB2 counts as the cause when it amplifies the highest mode by more than exp(10) = 2.2e4 by the
 #: time of the stop: a mode excited at 1e-4 of the deflection limit or less reaches it
@@ -68,6 +68,19 @@ def measured_growth_rate(growth: np.ndarray | None, decades: float = 4.0) -> flo
     if abs(first - second) > 0.3 * slope:
         return None
     return float(slope)
+
+
+def deviation_growth(history, steady_tip, threshold: float = 100.0) -> tuple[float | None, int]:
+    """(rate, samples): how fast a run leaves an unstable equilibrium -- the slope (1/s) of
+    log |tip - steady| against t over the samples of ``history`` (rows t, tip...) where the
+    deviation exceeds ``threshold`` |steady|, by then a pure exponential of the growing root;
+    None below 3 such samples. Compare with ``growth_rate()``."""
+    h = np.asarray(history, float)
+    dev = np.linalg.norm(h[:, 1:4] - steady_tip, axis=1)
+    late = dev > threshold * np.linalg.norm(steady_tip)
+    if late.sum() < 3:
+        return None, int(late.sum())
+    return float(np.polyfit(h[late, 0], np.log(dev[late]), 1)[0]), int(late.sum())
 
 
 def ab2_warning(form, dt: float, t: float) -> str | None:

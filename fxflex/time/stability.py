@@ -106,18 +106,19 @@ def ab2_law_step(w: float, window: float, log_growth: float = 1.0, d: float = 0.
 
 def top_mode(form) -> tuple[float, float]:
     """(w_max, d) of a formulation: its highest undamped circular frequency (rad/s) and the
-    damping rate c/rho (1/s). w_max is sqrt of the largest eigenvalue of (K, M) of the
+    damping rate c/rho (1/s). w_max is sqrt of the largest eigenvalue of (K, M) of the dense
     linearisation about the steady state where the formulation offers one (reduced models and
     beams: spin softening included, the damping and gyroscopic terms left out), otherwise
-    ``omega_max()`` (TLF: the clamped body at rest)."""
+    ``omega_max()`` (TLF: the clamped body at rest, SLEPc)."""
     import scipy.linalg as la
+
+    from fxflex.analysis.linear import DenseStability
 
     scene = form.scene
     d = scene.damping.c / scene.material.rho
-    linearise = getattr(form, "linearise", None)
-    if callable(linearise):
+    if isinstance(form, DenseStability):           # dense (M, C, K); TLF's are PETSc matrices
         try:
-            M, _, K = linearise()
+            M, _, K = form.linearise()
             if np.all(np.isfinite(K)):
                 n = K.shape[0]
                 lam = la.eigh(0.5 * (K + K.T), M, eigvals_only=True,
