@@ -2,9 +2,9 @@
 (SPEC section 4).
 
 1. *physical* instability: the linearised rotating system about a converged steady state has an
-   eigenvalue with positive real part (SPEC section 6), beyond the eigensolver's round-off
-   (1e-9 of the highest frequency). Formulations that can answer offer ``growth_rate()`` ->
-   (Re lambda_max, |Im lambda| of that root).
+   eigenvalue with positive real part (SPEC section 6) beyond the eigensolver's round-off: the
+   formulation's own ``stable()`` is False; ``growth_rate()`` gives (Re lambda_max, |Im lambda|
+   of that root).
 2. *numerical*: the scheme amplifies the highest mode (w_max, damping c/rho; see
    :func:`fxflex.time.stability.top_mode`) at this step - central difference beyond its limit,
    AB2 by more than exp(``AB2_LOG_GROWTH``) by the time of the stop (its exact root).
@@ -102,19 +102,21 @@ def ab2_warning(form, dt: float, t: float) -> str | None:
             f"keeps the growth below e over {t:.3g} s")
 
 
-def _physical(form) -> tuple[float, float] | None:
-    """(Re lambda_max, |Im lambda|) of the linearised system about a converged steady state, or
-    None when the formulation has no eigenvalue analysis or no converged steady state."""
-    growth = getattr(form, "growth_rate", None)
+def _physical(form) -> tuple[float, float, bool] | None:
+    """(Re lambda_max, |Im lambda| of that root, unstable) of the linearised system about a
+    converged steady state (the verdict is the formulation's own ``stable()``, with its
+    eigensolver's round-off tolerance), or None without eigenvalue analysis or steady state."""
+    growth, stable = getattr(form, "growth_rate", None), getattr(form, "stable", None)
     if not callable(growth):
         return None
     try:
         if not form.steady_state().converged:
             return None
         rate, freq = growth()
-    except (ValueError, np.linalg.LinAlgError):
+        grows = (not stable()) if callable(stable) else rate > 0.0
+    except (ValueError, np.linalg.LinAlgError, RuntimeError):
         return None
-    return (rate, freq) if math.isfinite(rate) else None
+    return (rate, freq, bool(grows and rate > 0.0)) if math.isfinite(rate) else None
 
 
 def diagnose(form, integrator: str, dt: float, result) -> dict:
@@ -129,7 +131,7 @@ def diagnose(form, integrator: str, dt: float, result) -> dict:
     phys = _physical(form)
     if phys is not None:
         out["growth_rate"] = phys[0]
-        if phys[0] > 1e-9 * w:
+        if phys[2]:
             out["cause"] = "physical"
             out["detail"] += (f"; the linearised rotating system has an eigenvalue with real part "
                               f"{phys[0]:.4g} 1/s (frequency {phys[1] / (2 * math.pi):.4g} Hz)"
