@@ -86,7 +86,10 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
     """
     if dt <= 0 or not math.isfinite(dt):
         raise ValueError("dt must be positive")
-    limit = divergence_limit(form) if limit is None else limit
+    where = ""
+    if limit is None:
+        limit = divergence_limit(form)
+        where = f" ({limit / form.scene.geometry.length:g} of the length)"
     nsteps = max(int(round((t_end - t0) / dt)), 1)
     q, v = form.initial_state() if state is None else state
     wanted = extras and (on_sample is not None or keep_history)
@@ -118,8 +121,7 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
         out = None
         if amp > limit:
             out = {"time_s": t, "kind": "range",
-                   "reason": f"deflection {amp:.4g} m beyond the limit {limit:.4g} m "
-                             f"({limit / form.scene.geometry.length:g} of the length)"}
+                   "reason": f"deflection {amp:.4g} m beyond the limit {limit:.4g} m{where}"}
             sample_now = True
         if sample_now:
             ex = extras(t, q, v) if extras is not None else ()
