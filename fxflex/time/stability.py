@@ -8,8 +8,11 @@ of the code, including details such as central difference's lagged velocity in t
 force. The spectral radius rho of that map is the amplification per step; ln(rho) / h the growth
 rate (1/s) of the scheme's fastest solution.
 
-- Central difference has a sharp limit: rho = 1 up to h w = 2 without damping; the damping
-  moves it (``critical_step``).
+- Central difference has a sharp limit: rho = 1 up to h w = 2 without damping. The damping force
+  sees the lagged velocity v_{n-1/2} + h/2 a_{n-1}, and the map's characteristic polynomial
+  2 z^3 + (2 h^2 w^2 + 3 d h - 4) z^2 + (2 - 4 d h) z + d h has its root z = -1 where
+  h^2 w^2 + 4 d h = 4: the limit is h = 2 (sqrt(w^2 + d^2) - d) / w^2, 1/d for d >> w (AB2's
+  limit under pure damping too).
 - AB2 has none: on an undamped mode its principal root grows like exp(w^4 h^3 t / 4) for small
   h w (NOTES.md), and the law underestimates the exact root by 10 % at h w = 0.24 and 40 % at
   0.48 (docs/reduced.md). Its critical step is defined against a window T and a threshold G:

@@ -44,6 +44,11 @@ def test_central_difference_limit():
     # damping lowers it: the damping force sees v_n ~ v_{n-1/2} + h/2 a_{n-1}, whose recurrence
     # under pure damping is AB2's: limit h d = 1 (not leapfrog's ideal 2)
     assert critical_step("cd", w, 0.1 * w) * w < 1.9
+    # the map's characteristic polynomial 2 z^3 + (2 h^2 w^2 + 3 d h - 4) z^2 + (2 - 4 d h) z
+    # + d h has its root z = -1 where h^2 w^2 + 4 d h = 4: h = 2 (sqrt(w^2 + d^2) - d) / w^2
+    for d in (1e-3 * w, 0.5 * w, 3 * w, 50 * w):
+        assert critical_step("cd", w, d, rtol=1e-10) == pytest.approx(
+            2 * (math.sqrt(w * w + d * d) - d) / w**2, rel=1e-8)
     assert critical_step("cd", 1.0, 1e6) * 1e6 == pytest.approx(1.0, rel=1e-4)
     assert critical_step("ab2", 1.0, 1e6, window=1.0, log_growth=1e-9) * 1e6 == \
         pytest.approx(1.0, rel=1e-3)
