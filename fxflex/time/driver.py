@@ -138,38 +138,40 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
 
     scheme = make_scheme(integrator)
     wall0 = time.perf_counter()
-    if resume is None:
-        k = 0
-        diverged = check(0, True)
-        if diverged is None:
-            scheme.start(form, t0, dt, q, v)
-            k = 1
-        fresh = True
-    else:
-        k = resume.step
-        last["t"] = t0 + k * dt
-        last_tip[:] = form.tip(last["t"], q)
-        scheme.resume(form, t0 + k * dt, dt, q, v, resume.arrays)
-        fresh = False                 # step k was checked and sampled before the checkpoint
-    check_every = max(1, min(sample_every, 100))
-    while diverged is None:
-        final = k >= nsteps
-        if fresh:
-            sample_now = final or k % sample_every == 0
-            if sample_now or k % check_every == 0:
-                diverged = check(k, sample_now)
-                if diverged is not None:
-                    break
-                if progress is not None:
-                    progress.update(k, f"t={t0 + k * dt:.4g} s")
-            if (checkpoint_every and on_checkpoint is not None and not final
-                    and k % checkpoint_every == 0):
-                on_checkpoint(k, q, v, scheme.state_arrays(), counters["samples"])
-        fresh = True
-        if final:
-            break
-        scheme.step(form, t0 + k * dt, dt, q, v)
-        k += 1
+    # a run that blows up overflows between two checks; the check reports it, numpy need not
+    with np.errstate(over="ignore", invalid="ignore"):
+        if resume is None:
+            k = 0
+            diverged = check(0, True)
+            if diverged is None:
+                scheme.start(form, t0, dt, q, v)
+                k = 1
+            fresh = True
+        else:
+            k = resume.step
+            last["t"] = t0 + k * dt
+            last_tip[:] = form.tip(last["t"], q)
+            scheme.resume(form, t0 + k * dt, dt, q, v, resume.arrays)
+            fresh = False                 # step k was checked and sampled before the checkpoint
+        check_every = max(1, min(sample_every, 100))
+        while diverged is None:
+            final = k >= nsteps
+            if fresh:
+                sample_now = final or k % sample_every == 0
+                if sample_now or k % check_every == 0:
+                    diverged = check(k, sample_now)
+                    if diverged is not None:
+                        break
+                    if progress is not None:
+                        progress.update(k, f"t={t0 + k * dt:.4g} s")
+                if (checkpoint_every and on_checkpoint is not None and not final
+                        and k % checkpoint_every == 0):
+                    on_checkpoint(k, q, v, scheme.state_arrays(), counters["samples"])
+            fresh = True
+            if final:
+                break
+            scheme.step(form, t0 + k * dt, dt, q, v)
+            k += 1
     wall = time.perf_counter() - wall0
     n = min(counters["checks"], GROWTH_POINTS)
     order = (np.arange(counters["checks"] - n, counters["checks"]) % GROWTH_POINTS)
