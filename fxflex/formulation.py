@@ -9,6 +9,10 @@ owns (the whole vector for small replicated models). ``comm`` is the communicato
 they are distributed -- ``MPI.COMM_SELF`` when every rank holds a full copy -- and is what
 global reductions (norms) must use. Constrained coordinates (TLF and ANCF root nodes, which
 follow the drive) may be part of ``q``; ``constrain`` writes their exact values.
+
+Implicit integration (:class:`Implicit`, used by ``generalized-alpha``): the same equations written
+on the free coordinates as M q'' = F(t, q, q'), with the tangents K_t = -dF/dq and C_t = -dF/dq'
+folded into one factorised iteration matrix S = m M + c C_t + k K_t.
 """
 
 from __future__ import annotations
@@ -22,8 +26,9 @@ import numpy as np
 from fxflex.errors import FxflexError
 from fxflex.scene import METHODS, Scene
 
-__all__ = ["Formulation", "SteadyState", "BuildOptions", "build", "check_options", "dof_count",
-           "default_integration", "method_info", "METHODS", "FORCE_EVAL", "PAPER_INTEGRATION"]
+__all__ = ["Formulation", "Implicit", "TangentFactor", "SteadyState", "BuildOptions", "build", "check_options", "dof_count",
+           "default_integration", "method_info", "METHODS", "FORCE_EVAL", "PAPER_INTEGRATION",
+           "IMPLICIT_STEP"]
 
 #: --force-eval choices per method (SPEC section 8); the first is the default
 FORCE_EVAL = {"tlf": ("ufl", "invariant"), "nebb": ("invariant", "element"),
@@ -80,6 +85,43 @@ class Formulation(Protocol):
         """Rotating-frame equilibrium at the scene's constant speed."""
 
 
+class TangentFactor(Protocol):
+    """A factorised iteration matrix S (see :meth:`Implicit.factorize`)."""
+
+    def solve(self, t: float, r: np.ndarray, out: np.ndarray) -> None:
+        """out = S^-1 r for a state array r that is zero on constrained coordinates; out is zero
+        there too. ``t`` is the time of the state being solved for: formulations whose tangent
+        turns with the hub (TLF, ANCF) keep the factor in the hub frame and rotate r and out with
+        A(phi(t)), so one factor serves while the body rotates."""
+
+
+@runtime_checkable
+class Implicit(Protocol):
+    """What implicit integrators need besides :class:`Formulation` (all six methods offer it).
+
+    The equations of motion on the free coordinates, M q_f'' = F(t, q, q'): F holds every force
+    but the inertia of the free coordinates -- elastic, damping, external, the rotating-frame
+    (inertia-coupling) terms, and the inertia of the prescribed motion M_fc q_c''(t) moved to the
+    right-hand side. ``acceleration`` is M^-1 F on the free rows. Arrays are state arrays as in
+    :class:`Formulation`; on constrained coordinates F, M x and S^-1 r are zero, so those rows
+    drop out of Newton's method and ``constrain`` supplies their exact values. Nothing here
+    allocates arrays except ``factorize``.
+    """
+
+    def force(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """out = F(t, q, v) on the free coordinates, 0 on constrained ones. q, v constrained."""
+
+    def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        """out = M_ff x_f on the free coordinates (constrained entries of x ignored), 0 on
+        constrained ones."""
+
+    def factorize(self, t: float, q: np.ndarray, v: np.ndarray, m: float, c: float, k: float
+                  ) -> TangentFactor:
+        """Assemble and factorise S = m M + c C_t + k K_t at (t, q, v) on the free coordinates
+        (K_t = -dF/dq, C_t = -dF/dv, exact or, where a method says so, up to terms too small to
+        slow Newton down); returns the handle, which stays valid until the next call."""
+
+
 def method_info() -> dict[str, str]:
     return {"ffrf": "solid, floating frame, relative coordinates, CMS (Sect. 2.1)",
             "gcms": "solid, floating frame, absolute coordinates, CMS (Sect. 2.2)",
@@ -132,6 +174,11 @@ PAPER_INTEGRATION = {"ffrf": ("ab2", 0.5e-6), "gcms": ("ab2", 0.3e-6), "tlf": ("
                      "lebb": ("ab2", 0.4e-6), "nebb": ("ab2", 0.4e-6), "ancf": ("cd", 1.7e-6)}
 #: the paper's efficiency study (Sect. 4.2) runs AB for every method at this step
 PAPER_AB_STEP = 0.02e-6
+#: default step of generalized-alpha: the largest round step at which its 10 ms transient on the
+#: default scene (1000 rpm) stays within 1 % of the peak deflection of the paper's explicit run
+#: with a margin (docs/implicit.md)
+IMPLICIT_STEP = {"ffrf": 20e-6, "gcms": 20e-6, "tlf": 10e-6, "lebb": 20e-6, "nebb": 20e-6,
+                 "ancf": 20e-6}
 
 
 def default_integration(method: str, integrator: str | None, dt: float | None
@@ -139,16 +186,19 @@ def default_integration(method: str, integrator: str | None, dt: float | None
     """(integrator, dt) with the paper's defaults filled in (SPEC section 4)."""
     paper_integrator, paper_dt = PAPER_INTEGRATION[method]
     integrator = integrator or paper_integrator
+    if integrator not in ("ab2", "cd", "generalized-alpha"):
+        raise FxflexError(f"--integrator: {integrator!r} is not allowed; allowed: ab2 cd "
+                          f"generalized-alpha")
     if dt is None:
         if integrator == paper_integrator:
             dt = paper_dt
         elif integrator == "ab2":
             dt = PAPER_AB_STEP
+        elif integrator == "generalized-alpha":
+            dt = IMPLICIT_STEP[method]
         else:
             raise FxflexError(f"--dt: required with --integrator {integrator} for {method} (the "
                               f"paper's step is for {paper_integrator}: {paper_dt:g} s)")
-    if integrator not in ("ab2", "cd"):
-        raise FxflexError(f"--integrator: {integrator} is not implemented yet; allowed: ab2 cd")
     return integrator, dt
 
 

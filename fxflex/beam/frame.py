@@ -31,7 +31,7 @@ import numpy as np
 
 from fxflex.beam.elements import lebb_tables
 from fxflex.beam.line import beam_line
-from fxflex.beam.linear import growth_rate, newton, omega_max
+from fxflex.beam.linear import DenseLU, growth_rate, newton, omega_max
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
@@ -158,6 +158,10 @@ class FloatingFrameBeam:
         self._memo_t: float | None = None
         self._memo_q, self._memo_v, self._memo_d = np.zeros(n), np.zeros(n), np.zeros(n)
         self._key = None
+        # implicit integration: the same coefficients without M^-1 (built when first asked for)
+        self._Keff, self._Ceff, self._feff = np.zeros((n, n)), np.zeros((n, n)), np.zeros(n)
+        self._fkey = None
+        self._lu: DenseLU | None = None
         self.timings["factorise"] = time.perf_counter() - t1
         self._steady: SteadyState | None = None
         self._omega_max: float | None = None
@@ -220,6 +224,68 @@ class FloatingFrameBeam:
             self.add_nonlinear_force(self._Wfull, self._QN)
             np.dot(self.Minv, self._QN[6:], out=w1)
             out -= w1
+
+    # ------------------------------------------------------------------ implicit integration
+    def _force_coefficients(self, rate: float, accel: float) -> None:
+        """K_eff = K_L + phi'' G - phi'^2 N [+ c/rho phi' G], C_eff = 2 phi' G + D and
+        f = -phi'' g + phi'^2 n: ``_coefficients`` without M^-1."""
+        Keff, Ceff = self._Keff, self._Ceff
+        np.multiply(self.G, accel + (self.c_rho * rate if self.absolute else 0.0), out=Keff)
+        Keff += self.K
+        np.multiply(self.N, rate * rate, out=self._nn)
+        Keff -= self._nn
+        np.multiply(self.G, 2.0 * rate, out=Ceff)
+        np.multiply(self.M, self.c_rho, out=self._nn)
+        Ceff += self._nn
+        np.multiply(self.g, -accel, out=self._feff)
+        np.multiply(self.n, rate * rate, out=self._w2)
+        self._feff += self._w2
+        self._fkey = (rate, accel)
+
+    def force(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """F = Q_e - C_eff W' - K_eff W - Q_N(W) + f (Eq. 44/58, the right-hand side of
+        ``acceleration`` before M^-1)."""
+        rate, accel = self.drive.rate(t), self.drive.accel(t)
+        if self._fkey != (rate, accel):
+            self._force_coefficients(rate, accel)
+        w1 = self._w1
+        np.dot(self._Keff, q, out=out)
+        np.dot(self._Ceff, v, out=w1)
+        out += w1
+        np.negative(out, out=out)
+        out += self._feff
+        lam = self.scene.load.factor(t)
+        np.multiply(self.fq, lam, out=w1)
+        out += w1
+        np.multiply(self.ftip, lam, out=w1)
+        out += w1
+        if self.nonlinear:
+            self._Wfull[6:] = q
+            self._QN.fill(0.0)
+            self.add_nonlinear_force(self._Wfull, self._QN)
+            out -= self._QN[6:]
+
+    def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        np.dot(self.M, x, out=out)
+
+    def factorize(self, t: float, q: np.ndarray, v: np.ndarray, m: float, c: float, k: float
+                  ) -> DenseLU:
+        """S = m M + c C_eff + k (K_eff + K_N,T(W)): exact tangents (K_N,T from the invariant
+        tensors, :meth:`~fxflex.beam.invariants.GramChain.tangent`)."""
+        rate, accel = self.drive.rate(t), self.drive.accel(t)
+        if self._fkey != (rate, accel):
+            self._force_coefficients(rate, accel)
+        if self._lu is None:
+            self._lu = DenseLU(self.dof)
+        S = self._lu.matrix
+        S[...] = self._Keff
+        if self.nonlinear:
+            self._Wfull[6:] = q
+            S += self.nonlinear_tangent(self._Wfull)[6:, 6:]
+        S *= k
+        S += c * self._Ceff
+        S += m * self.M
+        return self._lu.factor()
 
     def _same(self, a: np.ndarray, b: np.ndarray) -> bool:
         np.subtract(a, b, out=self._memo_d)

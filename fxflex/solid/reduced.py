@@ -40,7 +40,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fxflex.beam.linear import companion_eigenvalues
+from fxflex.beam.linear import DenseLU, companion_eigenvalues
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
 from fxflex.solid.model import SolidModel
@@ -179,6 +179,7 @@ class ReducedFormulation:
         self.constant_speed = scene.rotation.profile == "constant"
         self.timings: dict[str, float] = {}
         self._eig = None
+        self._lu: DenseLU | None = None
 
     # -- Formulation interface ---------------------------------------------------------------
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -206,6 +207,32 @@ class ReducedFormulation:
 
     def extras(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[float]:
         return (self.drive_torque(t, q, v),)
+
+    # -- implicit integration (formulation.Implicit) ----------------------------------------------
+    def force(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """F = q'' itself: the modal mass is the identity and nothing is constrained."""
+        self.acceleration(t, q, v, out)
+
+    def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        out[:] = x
+
+    def factorize(self, t: float, q: np.ndarray, v: np.ndarray, m: float, c: float, k: float
+                  ) -> DenseLU:
+        """S = m I + c C_t + k K_t with the exact tangents of the linear reduced equations,
+        K_t = -sum_i w_i(t) K_i and C_t = -sum_i w_i(t) C_i (the weighted blocks of
+        ``acceleration``; GCMS's stiffness turns with phi, FFRF's only changes with the speed)."""
+        self._weights(t)
+        if self._lu is None:
+            self._lu = DenseLU(self.dof)
+            self._S = np.zeros((self.dof, self.dof))
+        S, n, out = self._S, self.dof, self._lu.matrix
+        np.dot(self.kstack.w, self.kstack.A.reshape(self.kstack.k, n * n), out=S.reshape(-1))
+        np.multiply(S, -k, out=out)
+        np.dot(self.cstack.w, self.cstack.A.reshape(self.cstack.k, n * n), out=S.reshape(-1))
+        S *= c
+        out -= S
+        out.flat[::n + 1] += m
+        return self._lu.factor()
 
     # -- rotating frame: steady state, linearisation, eigenvalues --------------------------------
     @property
