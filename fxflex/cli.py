@@ -25,7 +25,8 @@ __all__ = ["main"]
 log = logging.getLogger("fxflex")
 
 
-BENCHES = ("steady", "tlf", "reduced", "beams", "paper", "accuracy", "stability", "skip")
+BENCHES = ("steady", "tlf", "reduced", "beams", "paper", "accuracy", "stability", "skip",
+           "implicit")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -107,8 +108,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--t-end", type=_positive("--t-end"), default=0.01, metavar="T",
                    help="end time (s), default 0.01")
     p.add_argument("--dt", type=_positive("--dt"), metavar="DT",
-                   help="time step (s); default: the paper's step for ab2/cd, and for "
-                        "generalized-alpha 20e-6 (tlf 10e-6), see docs/implicit.md")
+                   help="time step (s); default: the paper's step for ab2/cd; for "
+                        "generalized-alpha 20e-6 (tlf 10e-6) up to 1000 rpm, scaled by "
+                        "(1000/rpm)^1.5 above, not below 4e-6 (docs/implicit.md)")
     p.add_argument("--integrator", choices=("ab2", "cd", "generalized-alpha"),
                    help="default: the paper's (ab2 for ffrf gcms lebb nebb, cd for tlf ancf)")
     p.add_argument("--rho-inf", type=_number("--rho-inf"), metavar="X",
@@ -227,8 +229,12 @@ def cmd_run(args, comm) -> None:
     scene = _scene_from_args(args)
     options = BuildOptions(force_eval=args.force_eval, mass=args.mass, need_steady=False)
     check_options(args.method, options)
-    integrator, dt = default_integration(args.method, args.integrator, args.dt)
+    integrator, dt = default_integration(args.method, args.integrator, args.dt,
+                                         scene.rotation.rpm)
     rho_inf = None
+    if integrator == "generalized-alpha" and args.dt is None:
+        # the largest step not above the default that ends exactly at --t-end
+        dt = args.t_end / math.ceil(args.t_end / dt * (1.0 - 1e-12))
     if integrator == "generalized-alpha":
         from fxflex.time.implicit import DEFAULT_RHO_INF
         rho_inf = DEFAULT_RHO_INF if args.rho_inf is None else args.rho_inf

@@ -171,6 +171,7 @@ class ANCF:
         self.root_free = self.free[self.free < SLOTS]
         self.dof = 3 * len(self.free)
         self.free_dofs = (3 * self.free[:, None] + np.arange(3)).ravel()
+        self.con_dofs = (3 * self.con[:, None] + np.arange(3)).ravel()
         self.timings = {"assemble": time.perf_counter() - t0}
         t1 = time.perf_counter()
         self.Mff = Mff = Ms[np.ix_(self.free, self.free)]
@@ -295,17 +296,15 @@ class ANCF:
         """F = Q_e - Q_d - Q_k - M_fc e_c'' on the free coordinates (Eq. 57), 0 on the root's
         constrained ones."""
         rhs = self._free_force(t, q, v)
-        out3 = out.reshape(-1, 3)
-        out3[self.con] = 0.0
-        out3[self.free] = rhs
+        out[self.con_dofs] = 0.0               # flat indices: 2-D row indexing allocates
+        out[self.free_dofs] = rhs.reshape(-1)
 
     def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
         """M_ff x_f with M = M_s (x) I_3 (Eq. 54)."""
-        np.take(x.reshape(-1, 3), self.free, axis=0, out=self._xf, mode="clip")
+        np.take(x, self.free_dofs, out=self._xf.reshape(-1), mode="clip")
         np.matmul(self.Mff, self._xf, out=self._mfx)
-        out3 = out.reshape(-1, 3)
-        out3[self.con] = 0.0
-        out3[self.free] = self._mfx
+        out[self.con_dofs] = 0.0
+        out[self.free_dofs] = self._mfx.reshape(-1)
 
     def factorize(self, t: float, q: np.ndarray, v: np.ndarray, m: float, c: float, k: float
                   ) -> "HubFrameLU":

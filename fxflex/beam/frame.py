@@ -135,8 +135,8 @@ class FloatingFrameBeam:
         # int rho X0^T P X0 dV: the undeformed beam's moment of inertia about the axis
         self.I0 = float(rho * np.sum(dx * (sec.A * X**2 + 2 * X * sec.S_Z + sec.I_Z)))
         f = slice(6, None)                                   # root node clamped
-        self.M, self.G, self.N = full["M"][f, f], full["G"][f, f], full["N"][f, f]
-        self.K = full["K"][f, f]
+        # contiguous copies: np.dot(view, x, out=) would copy a strided view at every call
+        self.M, self.G, self.N, self.K = (np.ascontiguousarray(full[k][f, f]) for k in "MGNK")
         self.g, self.n, self.fq = full["g"][f], full["n"][f], full["fq"][f]
         self.ftip = np.zeros(self.dof)
         self.ftip[-6:-3] = scene.load.tip_force
