@@ -207,23 +207,33 @@ class FloatingFrameBeam:
         rate, accel = self.drive.rate(t), self.drive.accel(t)
         if self._key != (rate, accel):
             self._coefficients(rate, accel)
+        self._combine(t, q, v, out, self._Kq, self._Cv, self._f, self.Mi_fq, self.Mi_tip,
+                      self.Minv)
+
+    def _combine(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray, K, C, f, fq,
+                 ftip, Minv) -> None:
+        """out = -K W - C W' + f + r(t) (fq + ftip) - [Minv] Q_N(W): the right-hand side with
+        the matrices of ``acceleration`` (M^-1 applied) or of ``force`` (Minv None)."""
         w1 = self._w1
-        np.dot(self._Kq, q, out=out)
-        np.dot(self._Cv, v, out=w1)
+        np.dot(K, q, out=out)
+        np.dot(C, v, out=w1)
         out += w1
         np.negative(out, out=out)
-        out += self._f
+        out += f
         lam = self.scene.load.factor(t)
-        np.multiply(self.Mi_fq, lam, out=w1)
+        np.multiply(fq, lam, out=w1)
         out += w1
-        np.multiply(self.Mi_tip, lam, out=w1)
+        np.multiply(ftip, lam, out=w1)
         out += w1
         if self.nonlinear:
             self._Wfull[6:] = q
             self._QN.fill(0.0)
             self.add_nonlinear_force(self._Wfull, self._QN)
-            np.dot(self.Minv, self._QN[6:], out=w1)
-            out -= w1
+            if Minv is None:
+                out -= self._QN[6:]
+            else:
+                np.dot(Minv, self._QN[6:], out=w1)
+                out -= w1
 
     # ------------------------------------------------------------------ implicit integration
     def _force_coefficients(self, rate: float, accel: float) -> None:
@@ -248,22 +258,7 @@ class FloatingFrameBeam:
         rate, accel = self.drive.rate(t), self.drive.accel(t)
         if self._fkey != (rate, accel):
             self._force_coefficients(rate, accel)
-        w1 = self._w1
-        np.dot(self._Keff, q, out=out)
-        np.dot(self._Ceff, v, out=w1)
-        out += w1
-        np.negative(out, out=out)
-        out += self._feff
-        lam = self.scene.load.factor(t)
-        np.multiply(self.fq, lam, out=w1)
-        out += w1
-        np.multiply(self.ftip, lam, out=w1)
-        out += w1
-        if self.nonlinear:
-            self._Wfull[6:] = q
-            self._QN.fill(0.0)
-            self.add_nonlinear_force(self._Wfull, self._QN)
-            out -= self._QN[6:]
+        self._combine(t, q, v, out, self._Keff, self._Ceff, self._feff, self.fq, self.ftip, None)
 
     def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
         np.dot(self.M, x, out=out)
