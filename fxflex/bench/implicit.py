@@ -13,6 +13,7 @@ deflection"), with the same ratio per component alongside. Cost: wall time of th
 (the tip sampled only at the end) and its ratio to the reference run's, the speed-up.
 
 TLF runs on the coarse [10,2,2] mesh and on the scene's own mesh (``quick``: coarse only, rho 0.9).
+A second table runs the default step across speeds (0 to 10000 rpm) for the beams and TLF [10,2,2].
 Writes ``implicit.md`` (tables), ``implicit.json`` and ``implicit.png`` (error against step per
 method) to the output folder; rank 0 writes, every rank computes (TLF is distributed, the others
 are replicated).
@@ -39,6 +40,7 @@ RHOS = (0.9, 1.0, 0.5)
 COARSE = "mesh.solid=[10,2,2]"
 T_END = 0.01
 COMPONENTS = ("longitudinal", "orthogonal", "load")
+SPEEDS = (0.0, 1000.0, 2000.0, 3000.0, 5000.0, 10000.0)
 
 
 class Reference:
@@ -88,7 +90,8 @@ def compare(form, ref: Reference, dt: float, rho_inf: float, t_end: float = T_EN
         return out
     diff = hist[:, 1:] - ref.spline(hist[:, 0])
     out["error"] = float(np.linalg.norm(diff, axis=1).max() / ref.peak)
-    out["error_components"] = (np.abs(diff).max(axis=0) / ref.peaks).tolist()
+    with np.errstate(divide="ignore", invalid="ignore"):      # a component that stays 0
+        out["error_components"] = (np.abs(diff).max(axis=0) / ref.peaks).tolist()
     wall = res.wall_s
     if timing and getattr(form, "extras", None) is not None:
         wall, _ = _timed(form, "generalized-alpha", dt, t_end, rho_inf=rho_inf)
@@ -117,6 +120,35 @@ def _study(form, label: str, rhos, log) -> dict:
                           "steps": ref.steps, "us_per_step": 1e6 * ref.wall_s / ref.steps,
                           "peak_mm": 1e3 * ref.peak, "peaks_mm": (1e3 * ref.peaks).tolist()},
             "rows": rows, "best": best}
+
+
+def _speeds(scene: Scene, comm, log, quick: bool) -> list[dict]:
+    """The default step across speeds: beams and TLF [10,2,2] at 0 to 10000 rpm (a speed whose
+    reference diverges -- LEBB at 10000 rpm, physically -- is reported as such)."""
+    rows = []
+    methods = ("lebb", "nebb", "ancf") if quick else ("lebb", "nebb", "ancf", "tlf")
+    for method in methods:
+        for rpm in SPEEDS:
+            over = [f"rotation.rpm={rpm}"] + ([COARSE] if method == "tlf" else [])
+            form = build(method, load_scene(overrides=over, base=scene), comm,
+                         BuildOptions(need_steady=False))
+            dt = implicit_step(method, rpm)
+            row = {"method": method + (" [10,2,2]" if method == "tlf" else ""), "rpm": rpm,
+                   "dt_s": dt}
+            try:
+                ref = reference(form)
+            except RuntimeError:
+                row["error"] = None
+                rows.append(row)
+                continue
+            r = compare(form, ref, dt, 0.9, timing=False)
+            row.update(error=r["error"], error_components=r["error_components"],
+                       peak_mm=1e3 * ref.peak, factorizations=r["factorizations"],
+                       iterations_per_step=r["iterations"] / r["steps"])
+            rows.append(row)
+            log(f"  {row['method']} {rpm} rpm, default dt {1e6 * dt:.2f} us: error "
+                f"{100 * r['error']:.3f} %")
+    return rows
 
 
 def _plot(studies: list[dict], path: str) -> None:
@@ -178,6 +210,24 @@ def _tables(studies: list[dict], info: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _speed_table(rows: list[dict]) -> str:
+    head = ["method", "rpm", "default dt us", "peak mm", "error %", "long. %", "orth. %",
+            "load %", "iter/step", "factorisations"]
+    out = []
+    for r in rows:
+        if r["error"] is None:
+            out.append([r["method"], f"{r['rpm']:g}", f"{1e6 * r['dt_s']:.3g}",
+                        "reference diverges", "", "", "", "", "", ""])
+            continue
+        ec = r["error_components"]
+        out.append([r["method"], f"{r['rpm']:g}", f"{1e6 * r['dt_s']:.3g}",
+                    f"{r['peak_mm']:.3f}", f"{100 * r['error']:.3f}",
+                    *(f"{100 * e:.2f}" if np.isfinite(e) else "-" for e in ec),
+                    f"{r['iterations_per_step']:.2f}", r["factorizations"]])
+    return ("\nThe default step (`implicit_step`) across speeds, 10 ms, rho_inf 0.9:\n\n"
+            + markdown_table(head, out))
+
+
 def run(scene: Scene, out_dir: str, comm, quick: bool = False) -> dict:
     def log(text):
         if comm.rank == 0:
@@ -201,13 +251,15 @@ def run(scene: Scene, out_dir: str, comm, quick: bool = False) -> dict:
             form = build(method, sc, comm, BuildOptions(need_steady=False))
             log(f"{label}: built in {time.perf_counter() - t0:.1f} s")
             studies.append(_study(form, label, rhos, log))
+    speeds = _speeds(scene, comm, log, quick)
     info["load_end"] = os.getloadavg()[0]
-    report = _tables(studies, info)
+    report = _tables(studies, info) + _speed_table(speeds)
     if comm.rank == 0:
         with open(os.path.join(out_dir, "implicit.md"), "w") as fh:
             fh.write(report)
         with open(os.path.join(out_dir, "implicit.json"), "w") as fh:
-            json.dump({"info": info, "studies": studies}, fh, indent=1, default=str)
+            json.dump({"info": info, "studies": studies, "speeds": speeds}, fh, indent=1,
+                      default=str)
         _plot(studies, os.path.join(out_dir, "implicit.png"))
     summary = "\n".join(
         f"{st['label']}: " + ("no run within 1 %" if st["best"] is None else
