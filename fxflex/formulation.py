@@ -10,6 +10,11 @@ they are distributed -- ``MPI.COMM_SELF`` when every rank holds a full copy -- a
 global reductions (norms) must use. Constrained coordinates (TLF and ANCF root nodes, which
 follow the drive) may be part of ``q``; ``constrain`` writes their exact values.
 
+Modes and stability about the rotating steady state (SPEC section 6, docs/stability.md): every
+method also offers ``linearise()`` -> (M, C, K) (dense, or PETSc matrices for TLF),
+``rotating_modes(pairs)`` -> the lowest roots and mode vectors, ``mode_tip(X)`` -> the tip
+section's translation and rotation in them, ``growth_rate()`` and ``stable()``.
+
 Implicit integration (:class:`Implicit`, used by ``generalized-alpha``): the same equations written
 on the free coordinates as M q'' = F(t, q, q'), with the tangents K_t = -dF/dq and C_t = -dF/dq'
 folded into one factorised iteration matrix S = m M + c C_t + k K_t.

@@ -31,7 +31,8 @@ import numpy as np
 
 from fxflex.beam.elements import lebb_tables
 from fxflex.beam.line import beam_line
-from fxflex.beam.linear import DenseLU, growth_rate, newton, omega_max
+from fxflex.analysis.linear import DenseStability
+from fxflex.beam.linear import DenseLU, newton, omega_max
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
@@ -98,7 +99,7 @@ def _assemble(blocks: np.ndarray, n_full: int, dpn: int) -> np.ndarray:
     return out
 
 
-class FloatingFrameBeam:
+class FloatingFrameBeam(DenseStability):
     """LEBB (and, with a nonlinear force, NEBB) in the floating frame; see the module docstring."""
 
     extra_columns = ("drive_torque_Nm",)
@@ -146,6 +147,9 @@ class FloatingFrameBeam:
         self.Minv = 0.5 * (Minv + Minv.T)
         self.MiK, self.MiG, self.MiN = self.Minv @ self.K, self.Minv @ self.G, self.Minv @ self.N
         self.Mi_fq, self.Mi_tip = self.Minv @ self.fq, self.Minv @ self.ftip
+        self.Mi_load = self.Mi_fq + self.Mi_tip          # both follow the load ramp
+        self.load = self.fq + self.ftip
+        self.at_rest = self.drive.at_rest                # no Coriolis, no inertia loads
         self.Mi_g, self.Mi_n = self.Minv @ self.g, self.Minv @ self.n
         n = self.dof
         self._Kq, self._Cv, self._nn = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
@@ -207,23 +211,26 @@ class FloatingFrameBeam:
         rate, accel = self.drive.rate(t), self.drive.accel(t)
         if self._key != (rate, accel):
             self._coefficients(rate, accel)
-        self._combine(t, q, v, out, self._Kq, self._Cv, self._f, self.Mi_fq, self.Mi_tip,
-                      self.Minv)
+        rest = self.at_rest
+        self._combine(t, q, v, out, self._Kq, None if rest else self._Cv,
+                      None if rest else self._f, self.Mi_load, self.Minv)
 
-    def _combine(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray, K, C, f, fq,
-                 ftip, Minv) -> None:
-        """out = -K W - C W' + f + r(t) (fq + ftip) - [Minv] Q_N(W): the right-hand side with
-        the matrices of ``acceleration`` (M^-1 applied) or of ``force`` (Minv None)."""
+    def _combine(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray, K, C, f, load,
+                 Minv) -> None:
+        """out = -K W - C W' + f + r(t) load - [Minv] Q_N(W): the right-hand side with the
+        matrices of ``acceleration`` (M^-1 applied) or of ``force`` (Minv None). C None stands
+        for c/rho I (M^-1 D at rest), f None for no inertia loads (at rest)."""
         w1 = self._w1
         np.dot(K, q, out=out)
-        np.dot(C, v, out=w1)
+        if C is None:                                      # at rest: M^-1 (2 phi' G + D) = c/rho I
+            np.multiply(v, self.c_rho, out=w1)
+        else:
+            np.dot(C, v, out=w1)
         out += w1
         np.negative(out, out=out)
-        out += f
-        lam = self.scene.load.factor(t)
-        np.multiply(fq, lam, out=w1)
-        out += w1
-        np.multiply(ftip, lam, out=w1)
+        if f is not None:                                  # - phi'' g + phi'^2 n
+            out += f
+        np.multiply(load, self.scene.load.factor(t), out=w1)
         out += w1
         if self.nonlinear:
             self._Wfull[6:] = q
@@ -258,7 +265,8 @@ class FloatingFrameBeam:
         rate, accel = self.drive.rate(t), self.drive.accel(t)
         if self._fkey != (rate, accel):
             self._force_coefficients(rate, accel)
-        self._combine(t, q, v, out, self._Keff, self._Ceff, self._feff, self.fq, self.ftip, None)
+        self._combine(t, q, v, out, self._Keff, self._Ceff, None if self.at_rest else self._feff,
+                      self.load, None)
 
     def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
         np.dot(self.M, x, out=out)
@@ -362,14 +370,10 @@ class FloatingFrameBeam:
         C = 2 * omega * self.G + self.c_rho * self.M
         return self.M.copy(), C, self._stiffness(W, omega)
 
-    def growth_rate(self) -> tuple[float, float]:
-        """Largest real part of the eigenvalues of the linearised rotating system and the
-        |imaginary part| of that root (1/s, rad/s)."""
-        return growth_rate(*self.linearise())
-
-    def stable(self, steady: SteadyState | None = None) -> bool:
-        """True when no eigenvalue of the linearised system has a positive real part."""
-        return self.growth_rate()[0] <= 0.0
+    def mode_tip(self, X: np.ndarray) -> np.ndarray:
+        """(6, k) tip translation and rotation of mode vectors X (dof, k): the free-end node's
+        W_X, W_Y, W_Z, theta_X, theta_Y, theta_Z (O-XYZ)."""
+        return X[-6:]
 
     def omega_max(self) -> float:
         """Highest circular frequency of the clamped beam at rest, sqrt(max eig(K_L, M))."""
