@@ -174,3 +174,15 @@ def test_tlf_on_the_default_mesh_within_one_percent():
     assert row["diverged"] is None and row["steps"] == 300
     assert row["error"] < 0.01, (row["error"], row["error_components"])
     assert row["factorizations"] == 1 and row["iterations"] < 1.5 * row["steps"]
+
+
+@pytest.mark.paper
+def test_bench_implicit_quick_writes_its_report(tmp_path):
+    """``fxflex bench implicit --quick``: every study has a run within 1 % of the peak, and the
+    tables, data and plot are written."""
+    from fxflex.bench.implicit import run
+
+    result = run(load_scene(), str(tmp_path), COMM, quick=True)
+    assert all(b is not None and b["error"] <= 0.01 for b in result["best"].values())
+    assert {"implicit.md", "implicit.json", "implicit.png"} <= {p.name for p in tmp_path.iterdir()}
+    assert "across speeds" in (tmp_path / "implicit.md").read_text()
