@@ -42,7 +42,7 @@ and count as converged whatever the contraction says.
 
 Fallback. A step whose Newton iteration does not converge (theta >= 1, a non-finite residual, or
 ``max_iter`` iterations) with a factor made at an earlier step is retried with a fresh one; if it
-fails with a fresh factor the step is cut in two halves (recursively, ``max_halvings`` times) and
+fails with a fresh factor, or the iteration matrix is singular, the step is cut in two halves (recursively, ``max_halvings`` times) and
 then the run stops with :class:`NewtonFailure`, whose message says where and how it failed.
 """
 
@@ -174,7 +174,12 @@ class GeneralizedAlpha:
         renew = self.factor is None or self._renew or self._h_factor != h
         for _ in range(2):
             if renew:
-                self._factorize(form, t1, cq, cv, h)
+                try:
+                    self._factorize(form, t1, cq, cv, h)
+                except (np.linalg.LinAlgError, RuntimeError) as exc:   # PETSc.Error included
+                    self.factor = None
+                    self._why = f"the iteration matrix could not be factorised ({exc})"
+                    return False
             ok, iters = self._newton(form, t1, q, cq, cv)
             if ok:
                 self._book(iters)

@@ -262,3 +262,22 @@ def test_newton_failure_stops_the_run_with_a_diagnosis():
     assert abs(res.tip[0] - math.cos(res.t)) < 1e-3
     out = diagnose(form, "generalized-alpha", 0.01, res)
     assert out["cause"] == "numerical" and "Newton" in out["detail"]
+
+
+def test_a_singular_iteration_matrix_cuts_the_step():
+    """A factorisation that fails (as LAPACK or MUMPS do on a singular S) counts as a failed step:
+    the step is halved and the run goes on with the factor of the half step."""
+    form = Duffing(k3=1.0)
+    calls = []
+    original = form.factorize
+
+    def factorize(t, q, v, m, c, k):
+        calls.append(k)
+        if len(calls) == 1:
+            raise np.linalg.LinAlgError("singular")
+        return original(t, q, v, m, c, k)
+
+    form.factorize = factorize
+    res = simulate(form, "generalized-alpha", 1e-3, 0.01, limit=10.0)
+    assert res.diverged is None and res.stats["halvings"] == 1 and res.steps == 10
+    assert calls[1] == pytest.approx(calls[0] / 4)       # k ~ h^2: the half step's factor
