@@ -7,7 +7,9 @@
    of that root).
 2. *numerical*: the scheme amplifies the highest mode (w_max, damping c/rho; see
    :func:`fxflex.time.stability.top_mode`) at this step - central difference beyond its limit,
-   AB2 by more than exp(``AB2_LOG_GROWTH``) by the time of the stop (its exact root).
+   AB2 by more than exp(``AB2_LOG_GROWTH``) by the time of the stop (its exact root) - or
+   generalised-alpha's Newton iteration failed for good (it has no step limit on linear
+   systems). When an unstable eigenvalue is there too, the faster growth is named.
 3. otherwise the response itself left the model's range (a large but bounded physical
    response: the deflection limit of :func:`fxflex.time.driver.divergence_limit`), reported as
    *physical* with that explanation; a NaN without either cause is reported as numerical.
@@ -120,7 +122,11 @@ def _physical(form) -> tuple[float, float, bool] | None:
 
 
 def diagnose(form, integrator: str, dt: float, result) -> dict:
-    """{"time_s", "cause", "detail", ...} for a run that stopped early (``result.diverged``)."""
+    """{"time_s", "cause", "detail", ...} for a run that stopped early (``result.diverged``).
+
+    When both an unstable eigenvalue and the step could explain the stop, the faster growth
+    wins: a physical root growing at 56 1/s cannot blow a run up within 0.1 ms, AB2 at 1e5 1/s
+    can."""
     stop = result.diverged
     out = {"time_s": stop["time_s"], "cause": None, "detail": stop["reason"]}
     measured = measured_growth_rate(result.growth)
@@ -129,40 +135,51 @@ def diagnose(form, integrator: str, dt: float, result) -> dict:
     seen = f" (measured growth of the deflection: {measured:.4g} 1/s)" if measured else ""
     w, d = stability.top_mode(form)
     phys = _physical(form)
-    if phys is not None:
-        out["growth_rate"] = phys[0]
-        if phys[2]:
-            out["cause"] = "physical"
-            out["detail"] += (f"; the linearised rotating system has an eigenvalue with real part "
-                              f"{phys[0]:.4g} 1/s (frequency {phys[1] / (2 * math.pi):.4g} Hz)"
-                              + seen)
-            return out
-    out["omega_max"] = w
-    rate = stability.growth_rate(integrator, dt, w, d)
-    out["scheme_growth_rate"] = rate
-    modes = f"w_max = {w:.4g} rad/s, c/rho = {d:.4g} 1/s"
-    if integrator == "cd":
+    rate = -math.inf
+    if w is not None:
+        out["omega_max"] = w
+        rate = stability.growth_rate(integrator, dt, w, d)
+        out["scheme_growth_rate"] = rate
+    modes = (f"w_max = {w:.4g} rad/s" if w is not None else "w_max unknown") + \
+        f", c/rho = {d:.4g} 1/s"
+    elapsed = stop["time_s"]
+    numerical = None
+    if stop.get("kind") == "newton":
+        numerical = ("; generalized-alpha is unconditionally stable on linear systems, so the "
+                     "step only limits Newton's convergence: reduce dt")
+    elif w is None:
+        pass
+    elif integrator == "cd":
         limit = stability.critical_step("cd", w, d)
         out["dt_limit_s"] = limit
         if dt > limit:
-            out["cause"] = "numerical"
-            out["detail"] += (f"; central difference needs dt < {limit:.4g} s on the highest mode "
-                              f"({modes}; 2/w_max = {2 / w:.4g} s), dt = {dt:.4g} s: its root "
-                              f"grows at {rate:.4g} 1/s" + seen)
-            return out
+            numerical = (f"; central difference needs dt < {limit:.4g} s on the highest mode "
+                         f"({modes}; 2/w_max = {2 / w:.4g} s), dt = {dt:.4g} s: its root grows "
+                         f"at {rate:.4g} 1/s")
     elif integrator == "ab2":
-        elapsed = stop["time_s"]
         if rate * elapsed > AB2_LOG_GROWTH:
             window = max(elapsed, dt)
             limit = stability.critical_step("ab2", w, d, window=window)
             out["dt_limit_s"] = limit
-            out["cause"] = "numerical"
-            out["detail"] += (f"; AB2 amplifies the highest mode ({modes}) at {rate:.4g} 1/s "
-                              f"(exact root; law w^4 h^3/4 - c/(2 rho) = "
-                              f"{stability.ab2_law_rate(w, dt, d):.4g} 1/s), by exp("
-                              f"{rate * elapsed:.3g}) by this time; growth below e over "
-                              f"{window:.3g} s needs dt < {limit:.3g} s" + seen)
-            return out
+            numerical = (f"; AB2 amplifies the highest mode ({modes}) at {rate:.4g} 1/s (exact "
+                         f"root; law w^4 h^3/4 - c/(2 rho) = "
+                         f"{stability.ab2_law_rate(w, dt, d):.4g} 1/s), by exp("
+                         f"{rate * elapsed:.3g}) by this time; growth below e over {window:.3g} s "
+                         f"needs dt < {limit:.3g} s")
+    if phys is not None:
+        out["growth_rate"] = phys[0]
+    if phys is not None and phys[2] and (numerical is None or phys[0] >= 0.1 * rate):
+        out["cause"] = "physical"
+        out["detail"] += (f"; the linearised rotating system has an eigenvalue with real part "
+                          f"{phys[0]:.4g} 1/s (frequency {phys[1] / (2 * math.pi):.4g} Hz)"
+                          + seen)
+        return out
+    if numerical is not None:
+        out["cause"] = "numerical"
+        also = (f"; the rotating state is also unstable, but its root ({phys[0]:.4g} 1/s) grows "
+                f"far slower" if phys is not None and phys[2] else "")
+        out["detail"] += numerical + also + seen
+        return out
     if stop.get("kind") == "non-finite":
         out["cause"] = "numerical"
         out["detail"] += ("; non-finite values although the step is within the integrator's "
@@ -172,7 +189,8 @@ def diagnose(form, integrator: str, dt: float, result) -> dict:
     out["cause"] = "physical"
     eig = ("no eigenvalue of the linearised rotating system has a positive real part "
            f"(largest {phys[0]:.3g} 1/s)" if phys is not None else
-           f"{form.method} offers no eigenvalue analysis of the rotating state")
+           f"{getattr(form, 'method', 'this model')} offers no eigenvalue analysis of the "
+           "rotating state")
     span = getattr(form, "deflection_range", SMALL_DEFORMATION_RANGE)
     model = ("the small-deformation range of the model (the geometrically exact tlf and ancf "
              "follow large deflections)" if span <= SMALL_DEFORMATION_RANGE else

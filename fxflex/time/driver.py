@@ -8,7 +8,9 @@ checkpoints, and stops early when the run diverges. Divergence is checked every
 - a NaN or inf anywhere in the state (q and v, through their global sum of squares, which is also
   where an overflow shows first), in the deflection or in an extra output;
 - a deflection beyond the method's range, ``divergence_limit``: a quarter of the length for the
-  small-deformation models, twice the length for the geometrically exact ones.
+  small-deformation models, twice the length for the geometrically exact ones;
+- an implicit step whose Newton iteration fails for good
+  (:class:`~fxflex.time.implicit.NewtonFailure`): the run ends at the last converged state.
 
 A sample is written only once it has passed these checks, so no output ever holds a NaN; the
 result then carries the last finite deflection. The deflection magnitude at the last
@@ -28,7 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fxflex.time.explicit import make_scheme
+from fxflex.time.implicit import NewtonFailure
+from fxflex.time.schemes import make_scheme
 
 __all__ = ["RunResult", "Resume", "simulate", "divergence_limit", "GROWTH_POINTS",
            "SMALL_DEFORMATION_RANGE"]
@@ -49,6 +52,7 @@ class RunResult:
     samples: int = 0                 # samples handed to on_sample, counting those before a resume
     history: list = field(default_factory=list)   # (t, tip..., extras...) rows when keep_history
     growth: np.ndarray | None = None  # (m, 2) rows (t, max |tip|) of the last checks, oldest first
+    stats: dict = field(default_factory=dict)     # the scheme's counters (implicit: Newton)
 
 
 @dataclass
@@ -72,7 +76,8 @@ def divergence_limit(form) -> float:
 def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: int = 1,
              on_sample=None, progress=None, limit: float | None = None, keep_history=False,
              t0: float = 0.0, state: tuple[np.ndarray, np.ndarray] | None = None,
-             extras: bool = True, checkpoint_every: int = 0, on_checkpoint=None,
+             extras: bool = True, rho_inf: float | None = None,
+             scheme_options: dict | None = None, checkpoint_every: int = 0, on_checkpoint=None,
              resume: Resume | None = None) -> RunResult:
     """Integrate ``form`` from t0 to t_end with step dt.
 
@@ -80,9 +85,10 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
     (q is the live state array: copy it to keep it). The formulation's extra outputs (e.g. the
     drive torque, which costs an acceleration evaluation) are computed only when someone reads
     them: ``extras`` is true and there is an ``on_sample`` or a history; else the callback gets ().
-    on_checkpoint(step, q, v, arrays, samples) is called every ``checkpoint_every`` steps (not at
-    the last), after that step's sample. With ``resume`` the loop continues after step
-    ``resume.step`` from ``state``.
+    ``rho_inf`` and ``scheme_options`` (tol, max_iter, max_halvings) configure
+    ``generalized-alpha``. on_checkpoint(step, q, v, arrays, samples) is called every
+    ``checkpoint_every`` steps (not at the last), after that step's sample. With ``resume`` the
+    loop continues after step ``resume.step`` from ``state``.
     """
     if dt <= 0 or not math.isfinite(dt):
         raise ValueError("dt must be positive")
@@ -103,9 +109,10 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
     last = {"t": t0}
     diverged = None
 
-    def check(k: int, sample_now: bool) -> dict | None:
-        """Check the state at step k and write its sample; the reason if it diverged."""
-        t = t0 + k * dt
+    def check(k: int, sample_now: bool, t: float | None = None) -> dict | None:
+        """Check the state at step k (or time t) and write its sample; the reason if it
+        diverged."""
+        t = t0 + k * dt if t is None else t
         norm2 = float(np.dot(q, q) + np.dot(v, v))
         if distributed:
             norm2 = comm.allreduce(norm2)
@@ -136,7 +143,10 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
         last["t"] = t
         return out
 
-    scheme = make_scheme(integrator)
+    options = dict(scheme_options or {})
+    if rho_inf is not None:
+        options["rho_inf"] = rho_inf
+    scheme = make_scheme(integrator, **options)
     wall0 = time.perf_counter()
     # a run that blows up overflows between two checks; the check reports it, numpy need not
     with np.errstate(over="ignore", invalid="ignore"):
@@ -144,7 +154,10 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
             k = 0
             diverged = check(0, True)
             if diverged is None:
-                scheme.start(form, t0, dt, q, v)
+                try:
+                    scheme.start(form, t0, dt, q, v)
+                except NewtonFailure as exc:
+                    diverged = _newton_stop(exc, check, last, k)
                 k = 1
             fresh = True
         else:
@@ -170,10 +183,25 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
             fresh = True
             if final:
                 break
-            scheme.step(form, t0 + k * dt, dt, q, v)
+            try:
+                scheme.step(form, t0 + k * dt, dt, q, v)
+            except NewtonFailure as exc:
+                diverged = _newton_stop(exc, check, last, k)
+                break
             k += 1
     wall = time.perf_counter() - wall0
     n = min(counters["checks"], GROWTH_POINTS)
     order = (np.arange(counters["checks"] - n, counters["checks"]) % GROWTH_POINTS)
     return RunResult(t=last["t"], steps=k, tip=last_tip.copy(), diverged=diverged, wall_s=wall,
-                     samples=counters["samples"], history=history, growth=ring[order].copy())
+                     samples=counters["samples"], history=history, growth=ring[order].copy(),
+                     stats=dict(getattr(scheme, "stats", {})))
+
+
+def _newton_stop(exc: NewtonFailure, check, last: dict, k: int) -> dict:
+    """An implicit step failed for good: (q, v) hold the last converged state, at
+    ``exc.reached_s`` (between output times when the step had been cut); it is checked and
+    written unless it is the state already checked last."""
+    stop = {"time_s": exc.time_s, "kind": "newton", "reason": str(exc)}
+    if exc.reached_s > last["t"]:
+        return check(k, True, t=exc.reached_s) or stop
+    return stop

@@ -90,3 +90,14 @@ def test_measured_growth_rate_tells_exponentials_from_power_laws():
         pytest.approx(800.0, rel=1e-6)
     assert measured_growth_rate(np.column_stack([t[1:], t[1:] ** 2])) is None
     assert measured_growth_rate(np.column_stack([t, np.full_like(t, 1e-3)])) is None
+
+
+@pytest.mark.parametrize("rho_inf", [0.5, 0.9, 1.0])
+def test_generalized_alpha_has_no_step_limit(rho_inf):
+    """The implicit scheme's one-mode map (its own Newton on a one-dof Implicit formulation):
+    spectral radius <= 1 at every h w, tending to rho_inf; second-order accurate on the mode."""
+    radii = [amplification("generalized-alpha", hw, 1.0, 0.0, rho_inf=rho_inf)
+             for hw in np.logspace(-2, 5, 29)]
+    assert max(radii) <= 1.0 + 1e-12
+    assert radii[-1] == pytest.approx(rho_inf, abs=2e-3)
+    assert critical_step("cd", 1.0) == pytest.approx(2.0, rel=1e-5)     # for contrast
