@@ -128,7 +128,8 @@ def diagnose(form, integrator: str, dt: float, result) -> dict:
     wins: a physical root growing at 56 1/s cannot blow a run up within 0.1 ms, AB2 at 1e5 1/s
     can."""
     stop = result.diverged
-    out = {"time_s": stop["time_s"], "cause": None, "detail": stop["reason"]}
+    out = {"time_s": stop["time_s"], "cause": None, "detail": stop["reason"],
+           "stop": stop.get("kind")}       # non-finite | range | newton
     measured = measured_growth_rate(result.growth)
     if measured is not None:
         out["measured_growth_rate"] = measured
