@@ -35,9 +35,10 @@ class NewtonResult:
 
 
 def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = None,
-           rtol: float = 1e-10, max_it: int = 30, reference: float | None = None
-           ) -> NewtonResult:
-    """Solve residual(u) - rhs = 0 by Newton's method with a MUMPS LDL^T of the exact Jacobian.
+           rtol: float = 1e-10, max_it: int = 30, reference: float | None = None,
+           symmetric: bool = True) -> NewtonResult:
+    """Solve residual(u) - rhs = 0 by Newton's method with a MUMPS LDL^T of the exact Jacobian
+    (LU when ``symmetric`` is False).
 
     ``u`` must satisfy the (homogeneous) Dirichlet conditions on entry; ``rhs`` is a constant
     vector (nodal loads that are not a form). Converged when the residual norm falls below
@@ -49,7 +50,7 @@ def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = 
     F, J = fem.form(residual), fem.form(jacobian)
     A, b = create_matrix(J), create_vector(F)
     du = b.duplicate()
-    ksp = direct_solver(A)
+    ksp = direct_solver(A, symmetric=symmetric)
     out = NewtonResult()
     for it in range(max_it + 1):
         t0 = time.perf_counter()

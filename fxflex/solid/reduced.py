@@ -179,6 +179,7 @@ class ReducedFormulation:
         self.constant_speed = scene.rotation.profile == "constant"
         self.timings: dict[str, float] = {}
         self._eig = None
+        self._root_map: np.ndarray | None = None
 
     # -- Formulation interface ---------------------------------------------------------------
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -280,6 +281,22 @@ class ReducedFormulation:
         """(B, inertial): this rank's owned displacement entries are B q, measured in o-xyz when
         ``inertial`` (GCMS) and in O-XYZ otherwise (FFRF)."""
         raise NotImplementedError
+
+    def rotating_coordinates(self, t: float, q: np.ndarray) -> np.ndarray:
+        """z with U = B z in O-XYZ (B from :meth:`nodal_basis`) for the state q at time t."""
+        return q
+
+    def root_stress(self, t: float, q: np.ndarray) -> np.ndarray:
+        """sigma_X (Pa) at the four corners of the root section: the resultants of the Hooke
+        stress (Eq. 12-14) in the root cells (:mod:`fxflex.solid.section`), linear in z, so
+        projected on the basis once (first call collective on the build communicator)."""
+        from fxflex.solid.section import RootSection
+
+        if self._root_map is None:
+            basis, _ = self.nodal_basis()
+            self._root_map = RootSection(self.model, "hooke").resultant_matrix(basis)
+        return self.model.shape.axial_stress(
+            0.0, self._root_map @ self.rotating_coordinates(t, q))
 
     # -- helpers for subclasses ------------------------------------------------------------------
     def _solid_and_modes(self, count: int, model: SolidModel | None, data: MeshData | None,

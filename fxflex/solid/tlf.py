@@ -26,7 +26,11 @@ Transient (Eq. 35), inertial frame, nodal displacements u = x - x0 (Eq. 25) as u
 
 Steady state (SPEC section 6, NOTES.md): in the rotating frame, with U = A^T x - x0,
 
-    int S(E(U)) : dE dV - Omega^2 int rho P (X0 + U) . dU dV = F . dU,
+    int S(E(U)) : dE dV - Omega^2 int rho P (X0 + U) . dU dV [+ c Omega int (S U) . dU dV] = F . dU,
+
+the bracket being the absolute damping model's circulatory force (Eq. 68 at rest in the rotating
+frame: -c d(A U)/dt = -c A (U' + Omega S U) with U' = 0; SPEC section 5; the relative model has
+no damping force at equilibrium),
 
 St.Venant-Kirchhoff material, the centrifugal load acting on the deformed position, solved by
 Newton's method with the Jacobian from ``ufl.derivative`` (geometric stiffness and spin softening
@@ -85,6 +89,11 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
     w2 = fem.Constant(model.mesh, 0.0)
     R = (forms.svk_residual(model.scene.material, U, v, model.dx)
          - w2 * forms.centrifugal(model.rho, model.X0 + U, v, model.dx))
+    damping = model.scene.damping
+    absolute = damping.model == "absolute" and damping.c > 0.0
+    if absolute:                       # (c / rho) Omega int rho (S U) . v: not symmetric
+        wc = fem.Constant(model.mesh, 0.0)
+        R = R + wc * forms.mass_S(model.rho, U, v, model.dx)
     J = ufl.derivative(R, U, du)
     F_ext = model.rotating_load()
     t_setup = time.perf_counter() - t0
@@ -93,7 +102,10 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
     timings = {"setup": t_setup, "assemble": 0.0, "factor_solve": 0.0}
     for k in range(1, stages + 1):
         w2.value = omega**2 * k / stages
-        res = newton(R, J, U, [model.bc], rhs=F_ext, rtol=rtol, max_it=max_it)
+        if absolute:
+            wc.value = damping.c / model.rho * omega * math.sqrt(k / stages)
+        res = newton(R, J, U, [model.bc], rhs=F_ext, rtol=rtol, max_it=max_it,
+                     symmetric=not absolute)
         residuals = res.residuals
         iterations += res.iterations
         for key in ("assemble", "factor_solve"):
@@ -169,6 +181,7 @@ class TLF:
         self.timings = dict(self.model.timings)
         self._dyn: _Dynamics | None = None
         self._omega_max: float | None = None
+        self._root: tuple | None = None
         if not options.need_steady:
             self._dyn = _Dynamics(self)
         self.timings["build"] = time.perf_counter() - t0
@@ -257,6 +270,20 @@ class TLF:
     def field_writer(self, path: str) -> "FieldWriter":
         """``--fields``: an XDMF series of the displacement for ParaView (rank-collective)."""
         return FieldWriter(self, path)
+
+    def root_stress(self, t: float, q: np.ndarray) -> np.ndarray:
+        """sigma_X (Pa) at the four corners of the root section: the resultants of the SVK
+        stress (Eq. 30-33) in the root cells on U = A^T (x0 + u) - x0 (the steady state's q is U
+        itself, at t = 0), spread linearly over the section (:mod:`fxflex.solid.section`).
+        Collective on ``comm``."""
+        from fxflex.solid.section import RootSection
+
+        if self._root is None:
+            self._root = (RootSection(self.model, "svk"), self.model.node_coordinates())
+        section, x0 = self._root
+        A = rotation_z(self.drive.angle(t))
+        U = ((x0 + q.reshape(-1, 3)) @ A - x0).reshape(-1)
+        return self.model.shape.axial_stress(0.0, section.resultants(U))
 
     def tangent(self, q: np.ndarray) -> PETSc.Mat:
         """The tangent stiffness dQ_k/du at the owned displacements q (o-xyz, no constraints):
