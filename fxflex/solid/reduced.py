@@ -290,11 +290,9 @@ class ReducedFormulation:
         """sigma_X (Pa) at the four corners of the root section: the resultants of the Hooke
         stress (Eq. 12-14) in the root cells (:mod:`fxflex.solid.section`), linear in z, so
         projected on the basis once (first call collective on the build communicator)."""
-        from fxflex.solid.section import RootSection
-
         if self._root_map is None:
             basis, _ = self.nodal_basis()
-            self._root_map = RootSection(self.model, "hooke").resultant_matrix(basis)
+            self._root_map = self.model.root_section("hooke").resultant_matrix(basis)
         return self.model.shape.axial_stress(
             0.0, self._root_map @ self.rotating_coordinates(t, q))
 

@@ -276,10 +276,8 @@ class TLF:
         stress (Eq. 30-33) in the root cells on U = A^T (x0 + u) - x0 (the steady state's q is U
         itself, at t = 0), spread linearly over the section (:mod:`fxflex.solid.section`).
         Collective on ``comm``."""
-        from fxflex.solid.section import RootSection
-
         if self._root is None:
-            self._root = (RootSection(self.model, "svk"), self.model.node_coordinates())
+            self._root = (self.model.root_section("svk"), self.model.node_coordinates())
         section, x0 = self._root
         A = rotation_z(self.drive.angle(t))
         U = ((x0 + q.reshape(-1, 3)) @ A - x0).reshape(-1)
