@@ -223,6 +223,10 @@ def paper_rows(rows, damping=None, transients=None, efficiency=None) -> list[dic
     out += _damping_rows(damping or [])
     out += _efficiency_rows(efficiency or {})
     out += _step_rows(transients or {})
+    for f in out:
+        f["pass"] = None if f["pass"] is None else bool(f["pass"])
+        if isinstance(f["ours"], (np.floating, np.bool_)):
+            f["ours"] = f["ours"].item()
     return out
 
 
@@ -720,7 +724,7 @@ class Compare:
 
 def _bounded(result: CaseResult, t_end: float) -> np.ndarray:
     d = result.bounded()
-    return d[d[:, 0] <= t_end * (1 + 1e-9)]
+    return d[d[:, 0] <= t_end + 0.5 * result.case.dt]
 
 
 def _cell(x):

@@ -84,8 +84,9 @@ class CaseResult:
         return self.data if td is None else self.data[self.data[:, 0] <= td]
 
     def window(self, t_end: float) -> np.ndarray:
-        """The samples with t <= t_end (a longer run read over a shorter window)."""
-        return self.data[self.data[:, 0] <= t_end * (1 + 1e-9)]
+        """The samples up to t_end (a longer run read over a shorter window); half a step of
+        slack keeps a run's last sample, at round(t_end / dt) steps."""
+        return self.data[self.data[:, 0] <= t_end + 0.5 * self.case.dt]
 
     def column(self, name: str, t_end: float | None = None) -> np.ndarray:
         d = self.data if t_end is None else self.window(t_end)
@@ -155,7 +156,7 @@ def summarise(result: CaseResult, t_end: float, steady_tip: np.ndarray | None = 
            "diverged": None, "hann_mean_mm": None, "measured_growth": None,
            "eigen_growth": growth_rate}
     dv, td = result.diverged, result.divergence_time()
-    if dv is not None and td <= t_end * (1 + 1e-9):
+    if dv is not None and td <= t_end + 0.5 * case.dt:
         detail = dv["detail"].split("; ", 1)
         out["diverged"] = {"time_s": td, "cause": dv["cause"],
                            "detail": f"deflection past {result.limit:.3g} m"

@@ -9,14 +9,15 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fxflex.analysis.compare import SteadyRow, paper_rows, plan, run_compare
+from fxflex.analysis.compare import SAMPLE_DT, SteadyRow, paper_rows, plan, run_compare
 from fxflex.io.series import read_series
 from fxflex.scene import METHODS, PAPER_RPM, load_scene
 
 COARSE = ["mesh.solid=[10,2,2]", "mesh.beam_elements=4"]
 #: every SPEC section 7 figure the report must carry when all six methods run (by label start)
 SPEC7 = ["LEBB vs FFRF, longitudinal", "LEBB vs FFRF, orthogonal", "LEBB vs FFRF, load",
-         "GCMS vs FFRF, load", "NEBB vs TLF, longitudinal", "NEBB vs TLF, orthogonal",
+         "GCMS vs FFRF, longitudinal", "GCMS vs FFRF, orthogonal", "GCMS vs FFRF, load",
+         "NEBB vs TLF, longitudinal", "NEBB vs TLF, orthogonal",
          "NEBB vs TLF, load", "ANCF vs TLF, longitudinal", "ANCF vs TLF, orthogonal",
          "ANCF vs TLF, load", "Omega1: TLF orthogonal smaller", "Omega1: TLF load smaller",
          "Omega2: TLF orthogonal smaller", "Omega2: TLF load smaller",
@@ -76,9 +77,9 @@ def test_files_plots_and_series(study):
     assert columns[-2:] == ["sigma_root_max_Pa", "sigma_root_min_Pa"] and len(data) > 2
     assert meta["method"] in METHODS
     assert json.loads((out / "results.json").read_text())["finished"] is True
-    # a run that diverged stopped early; the others reached their window
-    t = {s["name"] + s["study"]: s for s in res["transients"]}
-    assert all(s["diverged"] or s["t_reached_s"] >= 0.999 * s["case"]["t_end"] for s in t.values())
+    # a run that diverged stopped early; the others reached their window (to within a sample)
+    assert all(s["diverged"] or s["t_reached_s"] >= s["case"]["t_end"] - SAMPLE_DT
+               - s["case"]["dt"] for s in res["transients"])
 
 
 @pytest.mark.serial
@@ -97,9 +98,12 @@ def test_damping_models(study):
             assert abs(absd[2] - absd[0]) > 1e-7 * abs(absd[0]), (m, rpm)
             if rpm == PAPER_RPM[2] and m in ("tlf", "nebb", "ancf"):
                 assert abs(absd[0]) < abs(absd[1]) < abs(absd[2])
-    figures = {f["figure"][:40]: f for f in res["paper"]}
-    assert figures["Relative model: convergent deflection in"]["pass"] is True
-    assert figures["Absolute model: convergent orthogonal def"]["pass"] is True
+    def row(start):
+        return next(f for f in res["paper"] if f["figure"].startswith(start))
+
+    assert row("Relative model: convergent deflection independent of c")["pass"] is True
+    assert row("Absolute model: convergent orthogonal deflection depends")["pass"] is True
+    assert row("Absolute model, Omega3: |orthogonal| grows with c")["pass"] is True
 
 
 def test_paper_rows_arithmetic():

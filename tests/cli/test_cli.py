@@ -28,6 +28,7 @@ def run(*args, cwd=None):
     (["run", "--method", "nebb", "--mass", "lumped"], "--mass"),
     (["run", "--method", "tlf", "--out", "/nonexistent/dir/x.csv"], "--out"),
     (["bench", "nosuch"], "nosuch"),
+    (["compare", "--methods", "ffrf,fem"], "fem"),
 ])
 def test_bad_input_is_one_line_and_exit_2(args, words, tmp_path):
     r = run(*args, cwd=tmp_path)
