@@ -35,28 +35,23 @@ class _Parser(argparse.ArgumentParser):
         raise FxflexError(message)
 
 
-def _positive(name):
+def _number(name, positive: bool = False):
+    """argparse type: a finite float (> 0 when ``positive``); argparse prefixes the option name."""
     def check(text):
         try:
             value = float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}: expected a number, got {text!r}") from None
-        if not (value > 0 and math.isfinite(value)):
-            raise argparse.ArgumentTypeError(f"{name}: must be > 0, got {text!r}")
-        return value
-    return check
-
-
-def _number(name):
-    def check(text):
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}: expected a number, got {text!r}") from None
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
         if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"{name}: expected a finite number, got {text!r}")
+            raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+        if positive and not value > 0:
+            raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
         return value
     return check
+
+
+def _positive(name):
+    return _number(name, positive=True)
 
 
 def _method(text):
