@@ -1,19 +1,185 @@
-"""Where fxflex keeps what it can reuse across runs (meshes, eigenmodes, invariant matrices).
+"""Where fxflex keeps what it can reuse across runs: meshes, eigenmodes, invariant matrices.
 
-``$FXFLEX_CACHE`` if set, else ``~/.cache/fxflex``. Entries are keyed by a hash of everything they
-depend on and written atomically (temporary file, then rename), so concurrent runs are safe.
+The folder is ``$FXFLEX_CACHE`` if set, else ``~/.cache/fxflex``, with one subfolder per kind
+(``meshes``, ``modes``, ``reduced``, ``tlf-invariants``). ``FXFLEX_NO_CACHE=1`` bypasses it: nothing
+is read or written and everything is computed afresh (``FXFLEX_NO_CACHE=modes,reduced`` bypasses
+only those kinds). ``fxflex cache info`` lists what is stored
+and ``fxflex cache clear [KIND]`` deletes it.
+
+Each entry is named by a hash of everything it depends on (:func:`entry_key`): the scene parts
+that matter, mesh divisions, quadrature degree, mode count, the library versions and the source
+text of the routines that produce it (:func:`code_version`), so editing any of them makes a new
+entry instead of reusing a stale one. Entries are ``.npz`` archives written atomically (a
+temporary file in the same folder, then ``os.replace``): a reader sees either no file or a
+complete one, so concurrent runs are safe; two runs that miss at once both compute and the last
+rename wins with identical content. A file that cannot be read counts as a miss.
+
+MPI is the callers' business (this module does no communication): the eigenmodes and the reduced
+models are stored in a partition-independent form by rank 0 and read by every rank, the TLF
+invariant matrices (one rank's subdomain) per rank and keyed by that rank's own numbering.
 """
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import importlib.metadata
+import importlib.util
+import json
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
-__all__ = ["cache_dir"]
+import numpy as np
+
+__all__ = ["cache_root", "cache_dir", "enabled", "code_version", "entry_key", "load", "save",
+           "publish", "usage", "clear", "bypass", "KINDS"]
+
+#: what is cached, and by whom
+KINDS = {"meshes": "gmsh .msh files of the solid beam (fxflex.mesh.solid)",
+         "modes": "clamped eigenmodes for FFRF/GCMS (fxflex.solid.cms)",
+         "reduced": "FFRF inertia invariants and GCMS global-mode matrices (fxflex.solid)",
+         "tlf-invariants": "TLF system invariant matrices, one file per rank "
+                           "(fxflex.solid.invariant)"}
+
+
+def cache_root() -> Path:
+    return Path(os.environ.get("FXFLEX_CACHE") or Path.home() / ".cache" / "fxflex")
+
+
+def enabled(kind: str | None = None) -> bool:
+    """Whether ``kind`` may be read and written (no kind: whether every kind may).
+    ``FXFLEX_NO_CACHE`` unset, empty or 0 allows all, a comma-separated list of kinds
+    (``modes,reduced``) bars those, anything else (``1``) bars all."""
+    value = os.environ.get("FXFLEX_NO_CACHE", "").strip()
+    if value in ("", "0"):
+        return True
+    barred = {v.strip() for v in value.split(",")}
+    if not barred <= set(KINDS):
+        return False
+    return kind is not None and kind not in barred
+
+
+@contextlib.contextmanager
+def bypass(*kinds: str):
+    """``with bypass("modes"):`` -- those kinds (all if none named) neither read nor written
+    inside the block (benchmarks of cold builds). Sets ``FXFLEX_NO_CACHE`` for the block."""
+    old = os.environ.get("FXFLEX_NO_CACHE")
+    os.environ["FXFLEX_NO_CACHE"] = ",".join(kinds) if kinds else "1"
+    try:
+        yield
+    finally:
+        if old is None:
+            del os.environ["FXFLEX_NO_CACHE"]
+        else:
+            os.environ["FXFLEX_NO_CACHE"] = old
 
 
 def cache_dir(kind: str) -> Path:
-    root = Path(os.environ.get("FXFLEX_CACHE") or Path.home() / ".cache" / "fxflex")
-    path = root / kind
+    path = cache_root() / kind
     path.mkdir(parents=True, exist_ok=True)
     return path
+
+
+def code_version(*modules: str) -> str:
+    """Hash of the source text of ``modules`` (dotted names), this module and the versions of
+    the numerical libraries: what an entry's producing routine was."""
+    h = hashlib.sha256()
+    for name in sorted({*modules, __name__}):
+        spec = importlib.util.find_spec(name)
+        h.update(name.encode())
+        h.update(Path(spec.origin).read_bytes())
+    h.update(_library_versions().encode())
+    return h.hexdigest()[:16]
+
+
+def _library_versions() -> str:
+    """Installed versions from the package metadata (importing the libraries to ask them would
+    cost what a cache hit saves)."""
+    versions = {}
+    for dist in ("numpy", "scipy", "fenics-dolfinx", "fenics-basix", "fenics-ffcx", "fenics-ufl",
+                 "petsc4py", "slepc4py"):
+        try:
+            versions[dist] = importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            versions[dist] = None
+    return json.dumps(versions, sort_keys=True)
+
+
+def entry_key(parts: dict) -> str:
+    """24 hex digits of the SHA-256 of ``parts`` (JSON, keys sorted; tuples as lists)."""
+    text = json.dumps(parts, sort_keys=True, separators=(",", ":"), default=_plain)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def _plain(obj):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.integer, np.floating)):
+        return obj.item()
+    raise TypeError(f"entry_key: cannot hash {type(obj).__name__}")
+
+
+def _path(kind: str, key: str) -> Path:
+    return cache_root() / kind / f"{key}.npz"
+
+
+def load(kind: str, key: str) -> dict[str, np.ndarray] | None:
+    """The arrays of entry ``key``, or None (absent, unreadable, or the cache is off)."""
+    if not enabled(kind):
+        return None
+    path = _path(kind, key)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {name: data[name] for name in data.files}
+    except (OSError, ValueError, EOFError, KeyError):
+        return None
+
+
+def save(kind: str, key: str, arrays: dict) -> Path | None:
+    """Write entry ``key`` atomically; returns its path (None when the cache is off or the
+    folder is not writable: a cache that cannot be written only costs time)."""
+    if not enabled(kind):
+        return None
+    try:
+        folder = cache_dir(kind)
+        fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".tmp", dir=folder)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, **{k: np.asarray(v) for k, v in arrays.items()})
+            publish(tmp, _path(kind, key))
+        except BaseException:
+            os.unlink(tmp)
+            raise
+    except OSError:
+        return None
+    return _path(kind, key)
+
+
+def publish(tmp: str | Path, path: Path) -> None:
+    """Make a finished temporary file the entry ``path`` in one step (readable by all, as a
+    shared cache folder needs: mkstemp creates files private to their owner)."""
+    os.chmod(tmp, 0o644)
+    os.replace(tmp, path)
+
+
+def usage() -> dict[str, dict]:
+    """{kind: {"files", "bytes"}} for every folder in the cache."""
+    root = cache_root()
+    out = {}
+    if root.is_dir():
+        for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+            files = [f for f in folder.iterdir() if f.is_file() and not f.name.startswith(".")]
+            out[folder.name] = {"files": len(files), "bytes": sum(f.stat().st_size for f in files)}
+    return out
+
+
+def clear(kind: str | None = None) -> dict[str, dict]:
+    """Delete one kind's folder (or the whole cache); returns what was there."""
+    before = usage()
+    root = cache_root()
+    targets = [root / kind] if kind else [root / k for k in before]
+    for path in targets:
+        shutil.rmtree(path, ignore_errors=True)
+    return {k: v for k, v in before.items() if kind in (None, k)}

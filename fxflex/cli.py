@@ -17,6 +17,7 @@ import sys
 import time
 
 from fxflex import __version__
+from fxflex.cache import KINDS as CACHE_KINDS
 from fxflex.errors import FxflexError
 from fxflex.scene import METHODS, load_scene
 
@@ -115,7 +116,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--force-eval", choices=("ufl", "invariant", "element"),
                    help="internal force route: tlf ufl|invariant, nebb/ancf invariant|element")
     p.add_argument("--mass", choices=("consistent", "lumped"), help="tlf mass matrix")
-    p.add_argument("--out", metavar="FILE.csv", help="write the time series as it goes")
+    p.add_argument("--out", metavar="FILE.csv",
+                   help="write the time series as it goes (without --out and --fields nothing "
+                        "is sampled: only the final deflection is reported)")
     p.add_argument("--fields", metavar="FILE.xdmf",
                    help="write the displacement field every --fields-every samples (solids)")
     p.add_argument("--fields-every", type=int, default=100, metavar="N",
@@ -123,6 +126,23 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--sample-dt", type=_positive("--sample-dt"), metavar="DT",
                    help="output interval (s); default max(dt, t_end/20000)")
     _common(p)
+
+    p = sub.add_parser("modes", help="modes and stability of the motion about the rotating "
+                                     "steady state; Campbell diagram")
+    p.add_argument("--method", type=_method, required=True, help=" | ".join(METHODS))
+    _physics(p)
+    p.add_argument("--n", type=int, default=10, metavar="N",
+                   help="number of modes (conjugate pairs), lowest frequency first; default 10")
+    p.add_argument("--campbell", metavar="RPM_MIN:RPM_MAX:COUNT",
+                   help="modes at COUNT speeds from RPM_MIN to RPM_MAX: Campbell diagram (PNG) "
+                        "with the 1x, 2x rotation lines and unstable ranges shaded, CSV, JSON")
+    p.add_argument("--mass", choices=("consistent", "lumped"),
+                   help="tlf mass matrix (default: as for run)")
+    p.add_argument("--out", metavar="DIR",
+                   help="output folder (default out/modes with --campbell; without it, write "
+                        "modes_<method>.json there only if given)")
+    _common(p)
+
     p = sub.add_parser("compare", help="the paper's comparison: every method at the three "
                                        "paper speeds, next to the paper's figures")
     p.add_argument("--methods", type=_method_list, default=list(METHODS), metavar="M,...",
@@ -133,6 +153,18 @@ def make_parser() -> argparse.ArgumentParser:
                    help="the paper's windows for every method, TLF included (prints its time "
                         "estimate first; tens of minutes)")
     _common(p)
+
+    p = sub.add_parser("cache", help="what fxflex keeps on disk between runs (meshes, eigenmodes, "
+                                     "invariant matrices): list it or clear it",
+                       description="The cache folder is $FXFLEX_CACHE (default ~/.cache/fxflex). "
+                                   "FXFLEX_NO_CACHE=1 makes every command bypass it "
+                                   "(FXFLEX_NO_CACHE=modes,reduced: only those kinds). Entries "
+                                   "are keyed by everything they depend on, so clearing is only "
+                                   "needed to free disk space (docs/performance.md).")
+    p.add_argument("action", choices=("info", "clear"), metavar="ACTION", help="info | clear")
+    p.add_argument("--kind", choices=tuple(CACHE_KINDS), metavar="KIND",
+                   help="only this kind: " + " | ".join(CACHE_KINDS))
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
     p = sub.add_parser("bench", help="benchmarks; tables written to --out")
     p.add_argument("name", choices=BENCHES, metavar="NAME", help=" | ".join(BENCHES))
@@ -248,6 +280,8 @@ def cmd_run(args, comm) -> None:
     nsteps = max(int(round(args.t_end / dt)), 1)
     sample_dt = args.sample_dt or max(dt, args.t_end / 20000)
     sample_every = max(1, int(round(sample_dt / dt)))
+    if not (args.out or args.fields):
+        sample_every = nsteps       # nothing to write: only the final deflection is reported
     extra_cols = list(getattr(form, "extra_columns", []))
     columns = ["t_s", "longitudinal_m", "orthogonal_m", "load_m"] + extra_cols
     meta = envelope(scene, method=args.method, integrator=integrator, dt_s=dt,
@@ -269,7 +303,8 @@ def cmd_run(args, comm) -> None:
 
     try:
         res = simulate(form, integrator, dt, args.t_end, sample_every=sample_every,
-                       on_sample=on_sample, progress=progress)
+                       on_sample=on_sample if writer or fields else None, progress=progress,
+                       extras=writer is not None)
     finally:
         if writer is not None:
             writer.close()
@@ -277,9 +312,11 @@ def cmd_run(args, comm) -> None:
             fields.close()
     progress.close(f"{res.steps} steps")
     diverged = diagnose(form, integrator, dt, res) if res.diverged else None
+    stable_fn = getattr(form, "stable", None)     # of the equilibrium at the final speed
+    verdict = stable_fn() if callable(stable_fn) else None
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        integrator=integrator, dt_s=dt, t_end_s=args.t_end, t_s=res.t,
-                       steps=res.steps, tip_mm=tip_mm(res.tip), stable=None,
+                       steps=res.steps, tip_mm=tip_mm(res.tip), stable=verdict,
                        diverged=diverged, series=os.path.abspath(args.out) if args.out else None,
                        timings_s={"preprocess": t_pre, "solve": res.wall_s},
                        detail_timings_s=form.timings)
@@ -292,6 +329,21 @@ def cmd_run(args, comm) -> None:
                  f"{diverged['detail']}")
     if args.out:
         text += f"\n  series: {args.out}"
+    _emit(comm, args, payload, text)
+
+
+def cmd_modes(args, comm) -> None:
+    from fxflex.analysis.modes import run_modes
+    from fxflex.formulation import BuildOptions, check_options
+
+    scene = _scene_from_args(args)
+    options = BuildOptions(mass=args.mass)
+    check_options(args.method, options)
+    if args.n < 1:
+        raise FxflexError(f"--n: must be >= 1, got {args.n}")
+    out_dir = args.out or ("out/modes" if args.campbell else None)
+    payload, text = run_modes(args.method, scene, comm, options, args.n, args.campbell,
+                              os.path.abspath(out_dir) if out_dir else None)
     _emit(comm, args, payload, text)
 
 
@@ -341,8 +393,39 @@ def cmd_compare(args, comm) -> None:
     _emit(comm, args, payload, report + f"\n(files in {out_dir})")
 
 
-COMMANDS = {"info": cmd_info, "steady": cmd_steady, "run": cmd_run, "compare": cmd_compare,
-            "bench": cmd_bench}
+def cmd_cache(args, comm) -> None:
+    """``fxflex cache info|clear [--kind KIND]``: the folder (``$FXFLEX_CACHE`` or
+    ~/.cache/fxflex), what each kind holds, and whether ``FXFLEX_NO_CACHE`` bypasses it."""
+    from fxflex import cache
+    from fxflex.io import envelope
+    from fxflex.scene import Scene
+
+    if args.kind and args.action != "clear":
+        raise FxflexError("--kind: only with 'clear' (info lists every kind)")
+    kinds = cache.usage()
+    removed = None
+    if args.action == "clear":
+        removed = cache.clear(args.kind) if comm.rank == 0 else {}
+        comm.Barrier()
+        kinds = cache.usage()
+    payload = envelope(Scene(), cache_dir=str(cache.cache_root()),
+                       enabled={k: cache.enabled(k) for k in cache.KINDS},
+                       kinds=kinds, removed=removed)
+    lines = [f"fxflex cache: {cache.cache_root()}"]
+    if removed is not None:
+        freed = sum(v["bytes"] for v in removed.values())
+        lines.append(f"  removed {sum(v['files'] for v in removed.values())} file(s), "
+                     f"{freed / 2**20:.1f} MiB" + (f" of kind {args.kind}" if args.kind else ""))
+    for kind, what in cache.KINDS.items():
+        k = kinds.get(kind, {"files": 0, "bytes": 0})
+        off = "" if cache.enabled(kind) else " [bypassed: FXFLEX_NO_CACHE]"
+        lines.append(f"  {kind:15s} {k['files']:5d} file(s) {k['bytes'] / 2**20:9.1f} MiB   "
+                     f"{what}{off}")
+    _emit(comm, args, payload, "\n".join(lines))
+
+
+COMMANDS = {"cache": cmd_cache, "info": cmd_info, "steady": cmd_steady, "run": cmd_run,
+            "modes": cmd_modes, "compare": cmd_compare, "bench": cmd_bench}
 
 
 def _quiet_logs() -> None:

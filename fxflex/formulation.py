@@ -9,6 +9,11 @@ owns (the whole vector for small replicated models). ``comm`` is the communicato
 they are distributed -- ``MPI.COMM_SELF`` when every rank holds a full copy -- and is what
 global reductions (norms) must use. Constrained coordinates (TLF and ANCF root nodes, which
 follow the drive) may be part of ``q``; ``constrain`` writes their exact values.
+
+Modes and stability about the rotating steady state (SPEC section 6, docs/stability.md): every
+method also offers ``linearise()`` -> (M, C, K) (dense, or PETSc matrices for TLF),
+``rotating_modes(pairs)`` -> the lowest roots and mode vectors, ``mode_tip(X)`` -> the tip
+section's translation and rotation in them, ``growth_rate()`` and ``stable()``.
 """
 
 from __future__ import annotations

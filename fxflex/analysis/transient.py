@@ -18,9 +18,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from fxflex.analysis.signals import growth_fit, hann_mean
+from fxflex.analysis.signals import hann_mean
 from fxflex.io import Progress, SeriesWriter
 from fxflex.time import diagnose, divergence_limit, simulate
+from fxflex.time.diagnosis import deviation_growth
 
 __all__ = ["Case", "CaseResult", "run_case", "summarise", "COLUMNS"]
 
@@ -162,12 +163,10 @@ def summarise(result: CaseResult, t_end: float, steady_tip: np.ndarray | None = 
                            "detail": f"deflection past {result.limit:.3g} m"
                            + (f"; {detail[1]}" if len(detail) > 1 else "")}
         if steady_tip is not None:
-            ft = np.all(np.isfinite(full[:, 1:4]), axis=1)
-            dev = np.linalg.norm(full[ft, 1:4] - steady_tip, axis=1)
-            scale = max(np.linalg.norm(steady_tip), 1e-12)
-            late = dev > (100.0 if dev.max() > 1e3 * scale else 3.0) * scale
-            if late.sum() >= 10:
-                out["measured_growth"] = growth_fit(full[ft, 0][late], dev[late])
+            ft = full[np.all(np.isfinite(full[:, 1:4]), axis=1)]
+            dev = np.linalg.norm(ft[:, 1:4] - steady_tip, axis=1).max()
+            far = dev > 1e3 * max(np.linalg.norm(steady_tip), 1e-12)
+            out["measured_growth"] = deviation_growth(ft, steady_tip, 100.0 if far else 3.0)[0]
     elif t.size > 2:
         out["hann_mean_mm"] = (1e3 * hann_mean(t, tip)).tolist()
     if steady_tip is not None:

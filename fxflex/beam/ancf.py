@@ -29,9 +29,10 @@ import scipy.sparse as sp
 from scipy.sparse import _sparsetools
 
 from fxflex.beam.elements import ANCF_SLOTS, ancf_tables, gauss
+from fxflex.analysis.linear import DenseStability
 from fxflex.beam.invariants import GramChain, _matvec
 from fxflex.beam.line import beam_line
-from fxflex.beam.linear import growth_rate, newton, omega_max
+from fxflex.beam.linear import newton, omega_max
 from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
@@ -96,7 +97,7 @@ def _voigt_pairs(nx: np.ndarray) -> np.ndarray:
     return np.stack(out, axis=-3)
 
 
-class ANCF:
+class ANCF(DenseStability):
     """Second-order ANCF beam in the inertial frame; see the module docstring."""
 
     method = "ancf"
@@ -143,7 +144,8 @@ class ANCF:
         T4 = np.matmul(Wf.reshape(n_el, -1, (2 * SLOTS) ** 2).transpose(0, 2, 1),
                        CWf.reshape(n_el, -1, (2 * SLOTS) ** 2)).reshape((n_el,) + (2 * SLOTS,) * 4)
         emap = np.arange(2 * DPN).reshape(2 * SLOTS, 3)
-        self.engine = GramChain(T1, T4, dpn=DPN, spn=SLOTS, emap=emap, esign=np.ones(emap.shape))
+        self.engine = GramChain(T1, T4, dpn=DPN, spn=SLOTS, emap=emap, esign=np.ones(emap.shape),
+                                system=self.force_eval == "invariant")
         self.quad = {"nx": nx, "dV": dV}                               # for checks
         # linear stiffness and scalar mass (Eq. 54: M = Ms x I_3), assembled
         KL = np.zeros((self.n_full, self.n_full))
@@ -190,6 +192,10 @@ class ANCF:
         self._col = np.zeros(self.n_slots)
         self._A = np.eye(3)
         self._Kacc = np.zeros((3, 3))
+        # at rest (0 rpm) A = I and the root does not move: the per-step rotation of e0, the
+        # rotating part of the damping and the root's inertia load are skipped
+        self.at_rest = self.drive.at_rest
+        self._rotate(0.0)
         self._steady: SteadyState | None = None
         self._omega_max: float | None = None
 
@@ -239,7 +245,7 @@ class ANCF:
         """out = M^-1 (Q_e - Q_d - Q_k) on the free coordinates (Eq. 57), the exact prescribed
         acceleration (phi'' S - phi'^2 P) A e0 on the root's constrained ones."""
         phi, rate, accel = self.drive.state(t)
-        A = self._rotate(phi)
+        A = self._A if self.at_rest else self._rotate(phi)
         u, F, Ku, d = self._u, self._F, self._Ku, self._d
         np.subtract(q, self.e0, out=u)
         Ku.fill(0.0)
@@ -253,28 +259,31 @@ class ANCF:
             # Eq. 56: e' - e_r' - phi' S (e - e_r) = e' - phi' S e; Eq. 69: e' - phi' S A e0
             d3, src = d.reshape(-1, 3), (self._Ae0 if self.absolute else q.reshape(-1, 3))
             d[:] = v
-            np.multiply(src[:, 1], rate, out=self._col)
-            d3[:, 0] += self._col
-            np.multiply(src[:, 0], rate, out=self._col)
-            d3[:, 1] -= self._col
+            if not self.at_rest:
+                np.multiply(src[:, 1], rate, out=self._col)
+                d3[:, 0] += self._col
+                np.multiply(src[:, 0], rate, out=self._col)
+                d3[:, 1] -= self._col
             self._Md.fill(0.0)
             Ms = self.Ms_csr
             _sparsetools.csr_matvecs(Ms.shape[0], Ms.shape[1], 3, Ms.indptr, Ms.indices, Ms.data,
                                      d, self._Md)
             self._Md *= self.c_rho
             F -= self._Md
-        K = self._Kacc
-        np.multiply(S3, accel, out=K)
-        K -= (rate * rate) * P3
-        np.take(self._Ae0, self.con, axis=0, out=self._Ae0c, mode="clip")
-        np.matmul(self._Ae0c, K.T, out=self._acon)
+        if not self.at_rest:                     # root acceleration (phi'' S - phi'^2 P) A e0
+            K = self._Kacc
+            np.multiply(S3, accel, out=K)
+            K -= (rate * rate) * P3
+            np.take(self._Ae0, self.con, axis=0, out=self._Ae0c, mode="clip")
+            np.matmul(self._Ae0c, K.T, out=self._acon)
         F3, out3 = F.reshape(-1, 3), out.reshape(-1, 3)
         nr = len(self.root_free)
         rhs = self._rhs
         np.take(F3, self.root_free, axis=0, out=rhs[:nr], mode="clip")
         rhs[nr:] = F3[SLOTS:]
-        np.matmul(self.Mfc, self._acon, out=self._mfa)
-        rhs -= self._mfa
+        if not self.at_rest:                     # its inertia load on the free coordinates
+            np.matmul(self.Mfc, self._acon, out=self._mfa)
+            rhs -= self._mfa
         np.matmul(self.Minv, rhs, out=self._afree)
         out3[self.con] = self._acon
         out3[self.root_free] = self._afree[:nr]
@@ -361,11 +370,22 @@ class ANCF:
         C = 2 * omega * np.kron(self.Ms, S3)[f] + self.c_rho * M
         return M, C, self._effective_stiffness(e, omega)
 
-    def growth_rate(self) -> tuple[float, float]:
-        return growth_rate(*self.linearise())
-
-    def stable(self, steady: SteadyState | None = None) -> bool:
-        return self.growth_rate()[0] <= 0.0
+    def mode_tip(self, X: np.ndarray) -> np.ndarray:
+        """(6, k) tip translation and small section rotation of rotating-frame mode vectors X
+        (free coordinates, k columns). The translation is the tip node's position r; the rotation
+        theta follows from the gradients' changes, delta d = theta x d for a rigid section: the
+        axial gradient d_X = e_X gives theta_Y = -delta d_X,z and theta_Z = delta d_X,y, the two
+        section gradients d_Y, d_Z (orthogonal, in the section plane) give
+        theta_X = 1/2 sum_k (d_k x delta d_k)_X / |d_k|^2."""
+        tip = X[-DPN:].reshape(SLOTS, 3, -1)             # the free end: every slot is free
+        d = self.e0n[-1]
+        out = np.empty((6, tip.shape[2]), dtype=X.dtype)
+        out[:3] = tip[0]
+        out[3] = 0.5 * sum((d[k, 1] * tip[k, 2] - d[k, 2] * tip[k, 1]) / (d[k] @ d[k])
+                           for k in (2, 3))
+        out[4] = -tip[1, 2]
+        out[5] = tip[1, 1]
+        return out
 
     def omega_max(self) -> float:
         """Highest circular frequency of the clamped beam at rest (K_L, M on the free

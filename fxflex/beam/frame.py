@@ -31,7 +31,8 @@ import numpy as np
 
 from fxflex.beam.elements import lebb_tables
 from fxflex.beam.line import beam_line
-from fxflex.beam.linear import growth_rate, newton, omega_max
+from fxflex.analysis.linear import DenseStability
+from fxflex.beam.linear import newton, omega_max
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
@@ -98,7 +99,7 @@ def _assemble(blocks: np.ndarray, n_full: int, dpn: int) -> np.ndarray:
     return out
 
 
-class FloatingFrameBeam:
+class FloatingFrameBeam(DenseStability):
     """LEBB (and, with a nonlinear force, NEBB) in the floating frame; see the module docstring."""
 
     extra_columns = ("drive_torque_Nm",)
@@ -148,6 +149,8 @@ class FloatingFrameBeam:
         self.Minv = 0.5 * (Minv + Minv.T)
         self.MiK, self.MiG, self.MiN = self.Minv @ self.K, self.Minv @ self.G, self.Minv @ self.N
         self.Mi_fq, self.Mi_tip = self.Minv @ self.fq, self.Minv @ self.ftip
+        self.Mi_load = self.Mi_fq + self.Mi_tip          # both follow the load ramp
+        self.at_rest = self.drive.at_rest                # no Coriolis, no inertia loads
         self.Mi_g, self.Mi_n = self.Minv @ self.g, self.Minv @ self.n
         n = self.dof
         self._Kq, self._Cv, self._nn = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
@@ -207,14 +210,15 @@ class FloatingFrameBeam:
             self._coefficients(rate, accel)
         w1 = self._w1
         np.dot(self._Kq, q, out=out)
-        np.dot(self._Cv, v, out=w1)
+        if self.at_rest:                                   # M^-1 (2 phi' G + D) = c/rho I
+            np.multiply(v, self.c_rho, out=w1)
+        else:
+            np.dot(self._Cv, v, out=w1)
         out += w1
         np.negative(out, out=out)
-        out += self._f
-        lam = self.scene.load.factor(t)
-        np.multiply(self.Mi_fq, lam, out=w1)
-        out += w1
-        np.multiply(self.Mi_tip, lam, out=w1)
+        if not self.at_rest:                               # - phi'' g + phi'^2 n
+            out += self._f
+        np.multiply(self.Mi_load, self.scene.load.factor(t), out=w1)
         out += w1
         if self.nonlinear:
             self._Wfull[6:] = q
@@ -319,14 +323,10 @@ class FloatingFrameBeam:
         C = 2 * omega * self.G + self.c_rho * self.M
         return self.M.copy(), C, self._stiffness(W, omega)
 
-    def growth_rate(self) -> tuple[float, float]:
-        """Largest real part of the eigenvalues of the linearised rotating system and the
-        |imaginary part| of that root (1/s, rad/s)."""
-        return growth_rate(*self.linearise())
-
-    def stable(self, steady: SteadyState | None = None) -> bool:
-        """True when no eigenvalue of the linearised system has a positive real part."""
-        return self.growth_rate()[0] <= 0.0
+    def mode_tip(self, X: np.ndarray) -> np.ndarray:
+        """(6, k) tip translation and rotation of mode vectors X (dof, k): the free-end node's
+        W_X, W_Y, W_Z, theta_X, theta_Y, theta_Z (O-XYZ)."""
+        return X[-6:]
 
     def omega_max(self) -> float:
         """Highest circular frequency of the clamped beam at rest, sqrt(max eig(K_L, M))."""

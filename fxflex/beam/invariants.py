@@ -87,7 +87,7 @@ class GramChain:
     """
 
     def __init__(self, T1e: np.ndarray, T4e: np.ndarray, dpn: int, spn: int,
-                 emap: np.ndarray, esign: np.ndarray):
+                 emap: np.ndarray, esign: np.ndarray, *, system: bool = True):
         self.n_el = T1e.shape[0]
         self.dpn, self.spn = dpn, spn
         self.ms, self.nc = emap.shape
@@ -106,7 +106,11 @@ class GramChain:
         # the slot matrix is a plain reshape of u when every coordinate is one slot component
         self.identity_slots = (dpn == spn * self.nc and np.array_equal(
             self.emap.ravel(), np.arange(self.ms * self.nc)) and np.all(self.esign == 1))
-        self._build_system()
+        # the system matrices only serve the ``system`` route (half of ANCF's build time): built
+        # here when asked for, else on the first system evaluation (checks, not the time loop)
+        self.K1h = None
+        if system:
+            self._build_system()
         self._alloc_element()
 
     # ------------------------------------------------------------------ system invariant route
@@ -195,6 +199,8 @@ class GramChain:
 
     def add_force_system(self, u: np.ndarray, out: np.ndarray) -> None:
         """out += K_N(u) u with the system invariant matrices (no element loop)."""
+        if self.K1h is None:
+            self._build_system()
         B = self.slots(u)
         np.take(B, self.I, axis=0, out=self.BI, mode="clip")
         np.take(B, self.J, axis=0, out=self.BJ, mode="clip")

@@ -1,5 +1,6 @@
-"""Small dense linear algebra shared by the beam formulations: Newton steady states, the
-highest circular frequency, and the growth rate of the linearised rotating system.
+"""Small dense linear algebra shared by the beam formulations: Newton steady states and the
+highest circular frequency (the eigenvalues of the linearised rotating system are in
+:mod:`fxflex.analysis.linear`).
 
 The beam models have at most a few thousand unknowns, so dense LAPACK is simple and fast.
 """
@@ -9,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as la
 
-__all__ = ["newton", "omega_max", "growth_rate", "companion_eigenvalues"]
+__all__ = ["newton", "omega_max"]
 
 
 def newton(residual, tangent, x0: np.ndarray, *, rtol: float = 1e-10, maxit: int = 30,
@@ -52,23 +53,3 @@ def omega_max(K: np.ndarray, M: np.ndarray) -> float:
     n = K.shape[0]
     lam = la.eigh(K, M, eigvals_only=True, subset_by_index=[n - 1, n - 1])
     return float(np.sqrt(max(lam[0], 0.0)))
-
-
-def companion_eigenvalues(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Eigenvalues lambda of (lambda^2 M + lambda C + K) x = 0 through the first-order companion
-    form [[0, I], [-M^-1 K, -M^-1 C]] (SPEC section 6; dense, fine at beam sizes)."""
-    n = M.shape[0]
-    MK = la.solve(M, K, assume_a="pos")
-    MC = la.solve(M, C, assume_a="pos")
-    A = np.zeros((2 * n, 2 * n))
-    A[:n, n:] = np.eye(n)
-    A[n:, :n] = -MK
-    A[n:, n:] = -MC
-    return la.eigvals(A)
-
-
-def growth_rate(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> tuple[float, float]:
-    """(largest real part, |imaginary part| of that root) of the quadratic eigenproblem."""
-    lam = companion_eigenvalues(M, C, K)
-    k = int(np.argmax(lam.real))
-    return float(lam[k].real), float(abs(lam[k].imag))

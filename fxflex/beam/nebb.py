@@ -58,7 +58,8 @@ class NEBB(FloatingFrameBeam):
         d = tab.d
         T1 = np.einsum("eq,eqk,qp,qr->ekpr", dx, self.e1, d, d)
         T4 = np.einsum("eq,qp,qr,qs,qt->eprst", dx * EA, d, d, d, d)
-        self.engine = GramChain(T1, T4, dpn=6, spn=2, emap=SLOT_MAP, esign=SLOT_SIGN)
+        self.engine = GramChain(T1, T4, dpn=6, spn=2, emap=SLOT_MAP, esign=SLOT_SIGN,
+                                system=self.force_eval == "invariant")
         # Eq. 66 work arrays
         n_el, nq = line.n_el, len(line.xi)
         self.EA = EA

@@ -56,14 +56,17 @@ def child_env() -> dict:
     return env
 
 
-def run_cli(args: list[str], scene: Scene, ranks: int = 1, timeout: float = 3600) -> dict:
+def run_cli(args: list[str], scene: Scene, ranks: int = 1, timeout: float = 3600,
+            env: dict | None = None) -> dict:
     """Run ``fxflex ARGS --json`` for ``scene`` on ``ranks`` ranks; its JSON plus ``wall_s``
-    (whole process) or ``{"error": last stderr line}``."""
+    (whole process) or ``{"error": last stderr line}``. ``env``: extra environment variables
+    (e.g. ``FXFLEX_CACHE``, ``FXFLEX_NO_CACHE``)."""
     cmd = [sys.executable, "-m", "fxflex", *args, "--json", *scene_overrides(scene)]
     if ranks > 1:
         cmd = ["mpirun", "-n", str(ranks), "--bind-to", "core"] + cmd
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=timeout)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env={**child_env(), **(env or {})},
+                          timeout=timeout)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         return {"error": (proc.stderr.strip().splitlines() or ["no output"])[-1], "wall_s": wall}

@@ -4,7 +4,8 @@
 mapped onto the body by :meth:`BeamShape.point_from_unit` (trilinear hexahedra between exact node
 positions: untwisted, the map is trilinear and the volume exact; twisted, the faces are bilinear
 and the volume error falls at second order). The result is cached as ``.msh`` in the cache folder
-keyed by the geometry, the divisions and the ``.geo`` text, and regenerated when any changes.
+keyed by the geometry, the divisions and the ``.geo`` text, and regenerated when any changes
+(never read or written with ``FXFLEX_NO_CACHE=1``, see :mod:`fxflex.cache`).
 Facet tags: ``ROOT`` (x = 0, clamped) and ``TIP`` (x = L).
 """
 
@@ -19,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fxflex.cache import cache_dir
+from fxflex import cache
 from fxflex.mesh.geometry import BeamShape
 from fxflex.scene import Geometry
 
@@ -41,8 +42,13 @@ class SolidMesh:
 
 
 def mesh_key(geometry: Geometry, divisions) -> str:
+    """Hash of what the mesh depends on: geometry, divisions, the ``.geo`` text and the source
+    of this module and of the shape map (snapping every node onto the grid makes the node
+    positions independent of the gmsh version)."""
     text = json.dumps({"geometry": asdict(geometry), "divisions": list(divisions),
-                       "geo": GEO_FILE.read_text()}, sort_keys=True)
+                       "geo": GEO_FILE.read_text(),
+                       "code": cache.code_version(__name__, "fxflex.mesh.geometry")},
+                      sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -72,7 +78,8 @@ def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = T
 
     divisions = tuple(int(n) for n in divisions)
     shape = BeamShape(geometry)
-    path = cache_dir("meshes") / f"beam-{mesh_key(geometry, divisions)}.msh"
+    use_cache = use_cache and cache.enabled("meshes")
+    path = cache.cache_root() / "meshes" / f"beam-{mesh_key(geometry, divisions)}.msh"
     generated = False
     gmsh.initialize(readConfigFiles=False)
     gmsh.option.setNumber("General.Terminal", 0)
@@ -84,14 +91,32 @@ def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = T
             else:
                 _generate(gmsh, shape, divisions)
                 generated = True
+                # distribute what a later run reads from the file (the node and cell order of a
+                # freshly generated model differ from the file's, and with them the MPI
+                # partition and every round-off): cold, warm and uncached runs agree exactly
+                folder = None
                 if use_cache:
-                    fd, tmp = tempfile.mkstemp(suffix=".msh", dir=path.parent)
-                    os.close(fd)
+                    try:
+                        folder = cache.cache_dir("meshes")
+                    except OSError:             # not writable: mesh without caching
+                        use_cache = False
+                fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".msh", dir=folder)
+                os.close(fd)
+                try:
                     gmsh.write(tmp)
-                    os.replace(tmp, path)
+                    gmsh.clear()
+                    gmsh.open(tmp)
+                    if use_cache:
+                        cache.publish(tmp, path)
+                    else:
+                        os.unlink(tmp)
+                except BaseException:
+                    if os.path.exists(tmp):
+                        os.unlink(tmp)
+                    raise
         mesh, cell_tags, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=3)
     finally:
         gmsh.finalize()
-    generated = comm.bcast(generated, root=0)
+    generated, use_cache = comm.bcast((generated, use_cache), root=0)
     return SolidMesh(mesh=mesh, cell_tags=cell_tags, facet_tags=facet_tags, shape=shape,
                      divisions=divisions, path=path if use_cache else None, generated=generated)

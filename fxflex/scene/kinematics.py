@@ -33,6 +33,12 @@ class Drive:
         self.spinup = rotation.profile == "spin-up"
         self.T = rotation.spinup_time
 
+    @property
+    def at_rest(self) -> bool:
+        """True when phi, phi' and phi'' are identically zero (0 rpm, either profile): the
+        formulations then drop their rotation terms instead of multiplying them by zero."""
+        return self.omega == 0.0
+
     def angle(self, t: float) -> float:
         w, T = self.omega, self.T
         if not self.spinup:

@@ -11,22 +11,37 @@ the model's communicator. The clamped rows carry 1 on the diagonal of K_L and 0 
 eigenvalues are infinite and never reach the target. Each mode is scaled to x^T M x = 1 and its
 sign fixed so that the largest tip-centre component is positive (deterministic across ranks).
 
-Everything the eigenmodes depend on is the scene's geometry, material and mesh, so this one
-function is the place to cache them later.
+Everything the eigenmodes depend on is the scene's geometry, material and mesh, so they are
+cached on disk (:mod:`fxflex.cache`, kind ``modes``) keyed by the mesh key, the material, the
+quadrature degree, the mode count, the solver tolerance and the source of the producing modules.
+An entry is independent of the partition: rank 0 gathers the modes in the mesh file's node order
+(gmsh's input numbering, ``mesh.geometry.input_global_indices``) with the node coordinates, and
+every rank reads back its owned rows, after checking that its nodes sit where the stored ones
+do. A cache written on 1 rank therefore serves 2 and vice versa (the vectors then differ from a
+fresh solve on the new partition by the solver's round-off, as two fresh solves do).
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-from petsc4py import PETSc
-from slepc4py import SLEPc
+from mpi4py import MPI
 
-from fxflex.solid.model import SolidModel
+from fxflex import cache
 
-__all__ = ["ClampedModes", "clamped_modes", "mass_and_stiffness"]
+if TYPE_CHECKING:                   # a cache hit needs neither PETSc nor dolfinx: imported on use
+    from petsc4py import PETSc
+
+    from fxflex.solid.model import SolidModel
+
+__all__ = ["ClampedModes", "clamped_modes", "mass_and_stiffness", "modes_key", "CODE_MODULES"]
+
+#: modules whose source decides the modes (with the mesh key): a change makes a new cache entry
+CODE_MODULES = ("fxflex.solid.cms", "fxflex.solid.forms", "fxflex.solid.model",
+                "fxflex.scene.model", "fxflex.scene.kinematics")
 
 
 @dataclass(frozen=True)
@@ -37,6 +52,7 @@ class ClampedModes:
     vectors: np.ndarray         # (n_owned, m) mass-normalised modes, zero on the clamp
     errors: np.ndarray          # (m,) SLEPc relative residual norms
     timings: dict = field(default_factory=dict)
+    from_cache: bool = False
 
     @property
     def count(self) -> int:
@@ -59,15 +75,46 @@ def mass_and_stiffness(model: SolidModel) -> tuple[PETSc.Mat, PETSc.Mat]:
     return K, M
 
 
+def modes_key(model: SolidModel, count: int, tol: float) -> str:
+    """Cache key of the ``count`` clamped modes of ``model`` (module docstring)."""
+    from dataclasses import asdict
+
+    from fxflex.mesh.solid import mesh_key
+
+    return cache.entry_key({
+        "kind": "modes", "mesh": mesh_key(model.scene.geometry, model.divisions),
+        "material": asdict(model.scene.material), "quadrature": model.quadrature_degree,
+        "count": int(count), "tol": float(tol), "code": cache.code_version(*CODE_MODULES)})
+
+
 def clamped_modes(model: SolidModel, count: int, *, K: PETSc.Mat | None = None,
-                  M: PETSc.Mat | None = None, tol: float = 1e-12) -> ClampedModes:
+                  M: PETSc.Mat | None = None, tol: float = 1e-12,
+                  use_cache: bool = True) -> ClampedModes:
     """The ``count`` lowest clamped eigenmodes of (K_L, M) on ``model.comm``.
 
     K and M may be passed when the caller has assembled them already (they must carry the clamp
-    as :func:`mass_and_stiffness` does).
+    as :func:`mass_and_stiffness` does); on a cache hit they are not needed. Collective.
     """
     if count < 1:
         raise ValueError(f"count must be >= 1, got {count}")
+    key = modes_key(model, count, tol) if use_cache and cache.enabled("modes") else None
+    if key is not None:
+        t0 = time.perf_counter()
+        hit = _read(model, key, count)
+        if hit is not None:
+            hit.timings["cache_load"] = time.perf_counter() - t0
+            return hit
+    modes = _solve(model, count, K, M, tol)
+    if key is not None:
+        _write(model, key, modes)
+    return modes
+
+
+def _solve(model: SolidModel, count: int, K, M, tol: float) -> ClampedModes:
+    from slepc4py import SLEPc
+
+    from fxflex.solid.petsc import make_direct
+
     t0 = time.perf_counter()
     if K is None or M is None:
         K, M = mass_and_stiffness(model)
@@ -81,11 +128,7 @@ def clamped_modes(model: SolidModel, count: int, *, K: PETSc.Mat | None = None,
     st = eps.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
     st.setShift(0.0)
-    ksp = st.getKSP()
-    ksp.setType("preonly")
-    pc = ksp.getPC()
-    pc.setType("cholesky")
-    pc.setFactorSolverType("mumps")
+    make_direct(st.getKSP())
     eps.setTolerances(tol, 500)
     eps.solve()
     nconv = eps.getConverged()
@@ -126,3 +169,54 @@ def _fix_signs(model: SolidModel, vectors: np.ndarray) -> None:
     signs = np.sign(tip[idx, np.arange(tip.shape[1])])
     signs[signs == 0] = 1.0
     vectors *= signs
+
+
+# -- the partition-independent cache entry ---------------------------------------------------------
+
+def _input_numbers(model: SolidModel) -> np.ndarray:
+    """Mesh-file (gmsh input) number of each owned node of ``model.V``. The P1 space and the Q1
+    geometry share the cell layout, so a node's dof and geometry index meet cell by cell."""
+    geo = model.mesh.geometry
+    imap = model.V.dofmap.index_map
+    node_of_dof = np.full(imap.size_local + imap.num_ghosts, -1, dtype=np.int64)
+    node_of_dof[model.V.dofmap.list.array] = geo.dofmap.array      # owned and ghost cells
+    owned = node_of_dof[: model.n_owned_nodes]
+    if np.any(owned < 0):
+        raise RuntimeError("clamped modes cache: an owned node lies in no local cell")
+    return np.asarray(geo.input_global_indices, dtype=np.int64)[owned]
+
+
+def _write(model: SolidModel, key: str, modes: ClampedModes) -> None:
+    """Gather the modes on rank 0 in mesh-file node order and store them there."""
+    comm = model.comm
+    parts = comm.gather((_input_numbers(model), model.node_coordinates(), modes.vectors), root=0)
+    if comm.rank == 0:
+        n_nodes = sum(p[0].size for p in parts)
+        coords = np.empty((n_nodes, 3))
+        vectors = np.empty((n_nodes, 3, modes.count))
+        for numbers, xyz, vec in parts:
+            coords[numbers] = xyz
+            vectors[numbers] = vec.reshape(-1, 3, modes.count)
+        cache.save("modes", key, {"omega2": modes.omega2, "errors": modes.errors,
+                                  "coords": coords, "vectors": vectors.reshape(-1, modes.count)})
+    comm.Barrier()          # the entry exists for every rank once this returns
+
+
+def _read(model: SolidModel, key: str, count: int) -> ClampedModes | None:
+    """This rank's rows of a stored entry, or None on every rank unless every rank has them."""
+    data = cache.load("modes", key)
+    local = None
+    if data is not None and data["omega2"].shape == (count,):
+        numbers = _input_numbers(model)
+        coords, stored = data["coords"], data["vectors"]
+        xyz = model.node_coordinates()
+        scale = model.scene.geometry.length + model.scene.geometry.hub_radius
+        if (numbers.size == 0 or numbers.max() < coords.shape[0]) and stored.shape == (
+                3 * coords.shape[0], count) and np.allclose(
+                coords[numbers], xyz, rtol=0, atol=1e-12 * scale):
+            rows = (3 * numbers[:, None] + np.arange(3)).reshape(-1)
+            local = ClampedModes(omega2=data["omega2"], vectors=np.ascontiguousarray(
+                stored[rows]), errors=data["errors"], from_cache=True)
+    if not model.comm.allreduce(local is not None, op=MPI.LAND):
+        return None
+    return local

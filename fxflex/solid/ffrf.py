@@ -32,16 +32,19 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fxflex.formulation import BuildOptions
 from fxflex.scene import Scene
 from fxflex.scene.kinematics import P3, S3
-from fxflex.solid.cms import ClampedModes
-from fxflex.solid.model import SolidModel
 from fxflex.solid.reduced import (MeshData, ReducedFormulation, RotatingSystem, inner, mat_apply,
-                                  nodal, tip_rows)
+                                  nodal, reduced_key, tip_rows)
+
+if TYPE_CHECKING:                   # a cache hit needs neither dolfinx nor SLEPc: imported on use
+    from fxflex.solid.cms import ClampedModes
+    from fxflex.solid.model import SolidModel
 
 __all__ = ["FFRF", "FFRFInvariants", "ffrf_invariants", "build", "dof_count"]
 
@@ -62,6 +65,7 @@ class FFRFInvariants:
     fe: np.ndarray          # Phi^T F: external load after the ramp
     b: np.ndarray           # Phi^T S^T F: torque of F about z per unit eta
     tip: np.ndarray         # (3, m) tip-centre displacement per unit eta
+    section: np.ndarray     # (6, m) tip-centre translation and tip-section rotation per unit eta
     J0: float               # int rho X0^T P X0
     s0: float               # (S X0) . F: torque of F about z on the undeformed body
 
@@ -79,7 +83,8 @@ def ffrf_invariants(model: SolidModel, data: MeshData, Phi: np.ndarray) -> FFRFI
     return FFRFInvariants(
         Lambda=0.5 * (Lam + Lam.T), G=0.5 * (G - G.T), N=0.5 * (N + N.T),
         g=inner(comm, Phi, data.f_S), n=inner(comm, Phi, data.f_c), fe=inner(comm, Phi, data.F),
-        b=inner(comm, Phi, nodal(S3.T, data.F)), tip=tip_rows(model, Phi), J0=data.J0,
+        b=inner(comm, Phi, nodal(S3.T, data.F)), tip=tip_rows(model, Phi),
+        section=model.tip_section(Phi), J0=data.J0,
         s0=data.load_torque)
 
 
@@ -97,14 +102,15 @@ class FFRF(ReducedFormulation):
                  data: MeshData | None = None):
         super().__init__(scene, comm)
         t0 = time.perf_counter()
-        Phi = self._solid_and_modes(scene.reduction.ffrf_modes, model, data, modes)
-        t1 = time.perf_counter()
-        self.inv = inv = ffrf_invariants(self.model, self.data, Phi)
+        count = scene.reduction.ffrf_modes
+        cached = self._use(count, model, data, modes)
+        key = reduced_key(scene, "ffrf", count) if cached else None
+        self.inv = inv = self._projections(key, FFRFInvariants, ffrf_invariants)
         self.dof = inv.Lambda.shape[0]
-        self.rot = RotatingSystem(K=inv.Lambda, G=inv.G, N=inv.N, f=inv.fe, n=inv.n, tip=inv.tip)
+        self.rot = RotatingSystem(K=inv.Lambda, G=inv.G, N=inv.N, f=inv.fe, n=inv.n, tip=inv.tip,
+                                  section=inv.section)
         self._build_operators()
-        t2 = time.perf_counter()
-        self.timings.update(invariants=t2 - t1, build=t2 - t0)
+        self.timings["build"] = time.perf_counter() - t0
 
     def _build_operators(self) -> None:
         inv, cr, eye = self.inv, self.c_rho, np.eye(self.dof)
@@ -114,8 +120,11 @@ class FFRF(ReducedFormulation):
             w = self.omega_s
             K = inv.Lambda - w * w * inv.N + ab * cr * w * inv.G
             C = 2.0 * w * inv.G + cr * eye
-            self._setup_operators([-K], [-C], [inv.fe, w * w * inv.n])
-            self.fw[1] = 1.0
+            if self.drive.at_rest:               # no centrifugal load column
+                self._setup_operators([-inv.Lambda], [-cr * eye], [inv.fe])
+            else:
+                self._setup_operators([-K], [-C], [inv.fe, w * w * inv.n])
+                self.fw[1] = 1.0
         else:
             self._setup_operators([-inv.Lambda, -inv.G, inv.N], [-inv.G, -eye],
                                   [inv.fe, inv.g, inv.n])

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,10 +52,12 @@ from fxflex.errors import FxflexError
 from fxflex.formulation import BuildOptions
 from fxflex.scene import Scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
-from fxflex.solid.cms import ClampedModes
-from fxflex.solid.model import SolidModel
 from fxflex.solid.reduced import (AffineStack, MeshData, ReducedFormulation, RotatingSystem,
-                                  inner, mat_apply, nodal, rotation_weights, tip_rows)
+                                  inner, mat_apply, nodal, reduced_key, rotation_weights, tip_rows)
+
+if TYPE_CHECKING:                   # a cache hit needs neither dolfinx nor SLEPc: imported on use
+    from fxflex.solid.cms import ClampedModes
+    from fxflex.solid.model import SolidModel
 
 __all__ = ["GCMS", "GlobalModes", "global_basis", "global_modes", "gram_cut", "build",
            "dof_count"]
@@ -128,6 +131,7 @@ class GlobalModes:
     QS: np.ndarray              # Psi~^T S_d F
     Q3: np.ndarray              # Psi~^T G3_d F
     tip: np.ndarray             # (3, r): inertial tip displacement per unit xi
+    section: np.ndarray         # (6, r): tip translation and tip-section rotation per unit xi
     J0: float
     s0: float
 
@@ -162,6 +166,7 @@ def global_modes(model: SolidModel, data: MeshData, Phi: np.ndarray, tol: float)
         T=T, gram=mus, kept=kept, K9=K9, J=0.5 * (J - J.T), MP=Wt @ C["P"] @ T,
         MG3=Wt @ C["G3"] @ T, wS=proj(data.f_S), wP=proj(data.f_c), QP=proj(nodal(P3, data.F)),
         QS=proj(nodal(S3, data.F)), Q3=proj(nodal(G3, data.F)), tip=tip_rows(model, Psi) @ T,
+        section=model.tip_section(Psi) @ T,
         J0=data.J0, s0=data.load_torque)
 
 
@@ -183,28 +188,35 @@ class GCMS(ReducedFormulation):
             raise FxflexError(f"reduction.gcms_modes: must be a multiple of 3 (the global modes "
                               f"are [G1d Phi, G2d Phi, G3d Phi]), got {n_global}")
         t0 = time.perf_counter()
-        Phi = self._solid_and_modes(n_global // 3, model, data, modes)
-        t1 = time.perf_counter()
-        self.gm = gm = global_modes(self.model, self.data, Phi, scene.reduction.gcms_gram_tol)
+        tol = scene.reduction.gcms_gram_tol
+        cached = self._use(n_global // 3, model, data, modes)
+        key = reduced_key(scene, "gcms", n_global // 3, gram_tol=tol) if cached else None
+        self.gm = gm = self._projections(key, GlobalModes,
+                                         lambda m, d, Phi: global_modes(m, d, Phi, tol))
         self.dof = gm.count
         K = gm.K9
         self.K0 = 0.5 * (K[0, 0] + K[1, 1]) + K[2, 2]
         self.Kc1, self.Ks1 = K[0, 2] + K[2, 0], K[1, 2] + K[2, 1]
         self.Kc2, self.Ks2 = 0.5 * (K[0, 0] - K[1, 1]), 0.5 * (K[0, 1] + K[1, 0])
         self.rot = RotatingSystem(K=self.stiffness(0.0), G=gm.J, N=-gm.J @ gm.J,
-                                  f=gm.QP + gm.Q3, n=gm.wP, tip=gm.tip)
+                                  f=gm.QP + gm.Q3, n=gm.wP, tip=gm.tip, section=gm.section)
         # relative damping's (c/rho) phi' J xi: one more weighted block, folded into K0 at
         # constant speed
         self._J_block = not self.absolute and not self.constant_speed
         J_const = 0.0 if self.absolute or self._J_block else self.c_rho * self.omega_s
-        kmats = [-self.K0 + J_const * gm.J, -self.Kc1, -self.Ks1, -self.Kc2, -self.Ks2]
-        if self._J_block:
-            kmats.append(gm.J)
-        self._setup_operators(kmats, [-self.c_rho * np.eye(self.dof)],
-                              [gm.QP, gm.QS, gm.Q3, gm.wS, gm.wP])
+        self._at_rest = self.drive.at_rest
+        if self._at_rest:
+            # phi = 0 for all t: K(0), the load A F = F and no inertia load, one matrix each
+            self._setup_operators([-self.stiffness(0.0)], [-self.c_rho * np.eye(self.dof)],
+                                  [gm.QP + gm.Q3])
+        else:
+            kmats = [-self.K0 + J_const * gm.J, -self.Kc1, -self.Ks1, -self.Kc2, -self.Ks2]
+            if self._J_block:
+                kmats.append(gm.J)
+            self._setup_operators(kmats, [-self.c_rho * np.eye(self.dof)],
+                                  [gm.QP, gm.QS, gm.Q3, gm.wS, gm.wP])
         self._dK = AffineStack([self.Kc1, self.Ks1, self.Kc2, self.Ks2])
-        t2 = time.perf_counter()
-        self.timings.update(global_modes=t2 - t1, build=t2 - t0)
+        self.timings["build"] = time.perf_counter() - t0
 
     def stiffness(self, phi: float) -> np.ndarray:
         """K(phi) = Psi~^T A_d K_L A_d^T Psi~ (Eq. 21) from the nine constant matrices."""
@@ -217,6 +229,9 @@ class GCMS(ReducedFormulation):
         return c * self.gm.MP + s * self.gm.J + self.gm.MG3
 
     def _weights(self, t: float) -> None:
+        if self._at_rest:
+            self.fw[0] = self.ramp(t)
+            return
         phi, w, a = self.drive.state(t)
         c, s, c2, s2 = rotation_weights(phi)
         kw, fw = self.kstack.w, self.fw

@@ -29,10 +29,17 @@ nodes): the "system" of one process. Ghost contributions are accumulated afterwa
 for an assembled UFL vector, so on one process these are the paper's system matrices and on
 several their subdomain parts. Products use PETSc sequential AIJ matrices on arrays allocated
 once; nothing is allocated per evaluation.
+
+Building the matrices takes seconds on the default mesh (6.7 s serial), so they are cached on disk
+(:mod:`fxflex.cache`, kind ``tlf-invariants``), one entry per rank: a rank's matrices are its
+subdomain's, so the key hashes that rank's node coordinates and cell-node lists in its local
+numbering (with the material, the quadrature degree and this module's source). The same mesh on
+the same number of ranks partitions the same way and hits; any other partition misses and builds.
 """
 
 from __future__ import annotations
 
+import hashlib
 import time
 
 import basix
@@ -40,7 +47,10 @@ import numpy as np
 import scipy.sparse as sp
 from petsc4py import PETSc
 
-__all__ = ["CellGradients", "cell_gradients", "InvariantForce"]
+from fxflex import cache
+
+__all__ = ["CellGradients", "cell_gradients", "InvariantForce", "invariant_key",
+           "assemble_invariants"]
 
 #: unordered node pairs (a <= b) of a Q1 hexahedron: 36 of the paper's 64 ordered ones
 _IA, _IB = np.triu_indices(8)
@@ -126,49 +136,94 @@ def _vec(array: np.ndarray) -> PETSc.Vec:
     return PETSc.Vec().createWithArray(array, comm=PETSc.COMM_SELF)
 
 
+def invariant_key(model) -> str:
+    """Cache key of this rank's invariant matrices (module docstring)."""
+    n_cells = model.mesh.topology.index_map(3).size_local
+    local = hashlib.sha256()
+    local.update(np.ascontiguousarray(model.V.tabulate_dof_coordinates()).tobytes())
+    local.update(np.ascontiguousarray(
+        model.V.dofmap.list.array.reshape(-1, 8)[:n_cells], dtype=np.int64).tobytes())
+    return cache.entry_key({"kind": "tlf-invariants", "lame": list(model.scene.material.lame),
+                            "quadrature": model.quadrature_degree, "local": local.hexdigest(),
+                            "code": cache.code_version(__name__)})
+
+
+def _csr_arrays(name: str, a: sp.csr_matrix) -> dict[str, np.ndarray]:
+    a.sum_duplicates()
+    a.sort_indices()
+    return {f"{name}_indptr": a.indptr, f"{name}_indices": a.indices, f"{name}_data": a.data,
+            f"{name}_shape": np.array(a.shape)}
+
+
+def _from_arrays(name: str, arrays: dict) -> sp.csr_matrix:
+    return sp.csr_matrix((arrays[f"{name}_data"], arrays[f"{name}_indices"],
+                          arrays[f"{name}_indptr"]), shape=tuple(arrays[f"{name}_shape"]))
+
+
+def assemble_invariants(model, *, chunk: int = 1024) -> dict[str, np.ndarray]:
+    """This rank's K_L, K_N2, K_N3 (upper half) as CSR arrays and the node pairs (pa, pb): the
+    expensive part, integrated cell chunk by cell chunk."""
+    lmbda, mu = model.scene.material.lame
+    n_cells = model.mesh.topology.index_map(3).size_local
+    imap = model.V.dofmap.index_map
+    n_nodes = imap.size_local + imap.num_ghosts
+    n = 3 * n_nodes
+    nodes = model.V.dofmap.list.array.reshape(-1, 8)[:n_cells]
+    a, b = nodes[:, _IA], nodes[:, _IB]
+    keys = np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
+    unique, pair_of = np.unique(keys, return_inverse=True)
+    pair_of = pair_of.reshape(n_cells, 36)
+    P = unique.size
+    KL = sp.csr_matrix((n, n))
+    KN2 = sp.csr_matrix((P, n))
+    KN3 = sp.csr_matrix((P, P))
+    for start in range(0, n_cells, chunk):
+        sl = slice(start, min(start + chunk, n_cells))
+        cg = cell_gradients(model, sl)
+        kl, kn2, kn3 = _element_matrices(cg, lmbda, mu)
+        dofs = (3 * cg.nodes[:, :, None] + np.arange(3)).reshape(-1, 24)
+        pairs = pair_of[sl]
+        KL += _coo(np.repeat(dofs, 24, axis=1), np.tile(dofs, (1, 24)), kl, (n, n))
+        KN2 += _coo(np.repeat(pairs, 24, axis=1), np.tile(dofs, (1, 36)), kn2, (P, n))
+        KN3 += _coo(np.repeat(pairs, 36, axis=1), np.tile(pairs, (1, 36)), kn3, (P, P))
+    for m in (KL, KN2, KN3):
+        m.sum_duplicates()
+    return {"pa": (unique // n_nodes).astype(np.intp), "pb": (unique % n_nodes).astype(np.intp),
+            "nnz_full": np.array([KL.nnz, KN2.nnz, KN2.nnz, KN3.nnz]),
+            **_csr_arrays("KL", KL), **_csr_arrays("KN2", KN2),
+            **_csr_arrays("KN3", sp.triu(KN3, format="csr"))}
+
+
 class InvariantForce:
     """Q_k(u) of Eq. 35 from the system invariant matrices K_L, K_N2 (K_N1 = K_N2^T / 2), K_N3.
 
     ``apply(u, out)`` works on the local (owned + ghost) arrays of the model's function space and
-    leaves ghost contributions unaccumulated, like a UFL vector assembly.
+    leaves ghost contributions unaccumulated, like a UFL vector assembly. The matrices come from
+    the disk cache when this rank built them before (``from_cache``), else they are assembled
+    and stored.
     """
 
-    def __init__(self, model, *, chunk: int = 1024):
+    def __init__(self, model, *, chunk: int = 1024, use_cache: bool = True):
         t0 = time.perf_counter()
-        lmbda, mu = model.scene.material.lame
-        n_cells = model.mesh.topology.index_map(3).size_local
-        imap = model.V.dofmap.index_map
-        n_nodes = imap.size_local + imap.num_ghosts
-        n = 3 * n_nodes
-        nodes = model.V.dofmap.list.array.reshape(-1, 8)[:n_cells]
-        a, b = nodes[:, _IA], nodes[:, _IB]
-        keys = np.minimum(a, b).astype(np.int64) * n_nodes + np.maximum(a, b)
-        unique, pair_of = np.unique(keys, return_inverse=True)
-        pair_of = pair_of.reshape(n_cells, 36)
-        self.n_pairs = P = unique.size
-        self.pa = (unique // n_nodes).astype(np.intp)
-        self.pb = (unique % n_nodes).astype(np.intp)
-        KL = sp.csr_matrix((n, n))
-        KN2 = sp.csr_matrix((P, n))
-        KN3 = sp.csr_matrix((P, P))
-        for start in range(0, n_cells, chunk):
-            sl = slice(start, min(start + chunk, n_cells))
-            cg = cell_gradients(model, sl)
-            kl, kn2, kn3 = _element_matrices(cg, lmbda, mu)
-            dofs = (3 * cg.nodes[:, :, None] + np.arange(3)).reshape(-1, 24)
-            pairs = pair_of[sl]
-            KL += _coo(np.repeat(dofs, 24, axis=1), np.tile(dofs, (1, 24)), kl, (n, n))
-            KN2 += _coo(np.repeat(pairs, 24, axis=1), np.tile(dofs, (1, 36)), kn2, (P, n))
-            KN3 += _coo(np.repeat(pairs, 36, axis=1), np.tile(pairs, (1, 36)), kn3, (P, P))
+        key = invariant_key(model) if use_cache and cache.enabled("tlf-invariants") else None
+        arrays = cache.load("tlf-invariants", key) if key else None
+        self.from_cache = arrays is not None
+        if arrays is None:
+            arrays = assemble_invariants(model, chunk=chunk)
+            if key:
+                cache.save("tlf-invariants", key, arrays)
+        self.pa, self.pb = arrays["pa"].astype(np.intp), arrays["pb"].astype(np.intp)
+        self.n_pairs = P = self.pa.size
+        KL, KN2, KN3 = (_from_arrays(k, arrays) for k in ("KL", "KN2", "KN3"))
+        n = KL.shape[0]
         # u_ds^T z as a fixed 0/1 matrix R (n x 6P): node a collects z_p u_b / 2, node b z_p u_a / 2
         comp = np.arange(3)
         rows = np.concatenate([3 * self.pa[:, None] + comp, 3 * self.pb[:, None] + comp])
         R = sp.csr_matrix((np.full(6 * P, 0.5), (rows.ravel(), np.arange(6 * P))),
                           shape=(n, 6 * P))
-        KL.sum_duplicates()
-        KN3.sum_duplicates()
         # stored: K_L in 3 x 3 blocks, K_N3 symmetric (upper half), K_N2 and R plain CSR
-        self.nnz_full = {"K_L": KL.nnz, "K_N1": KN2.nnz, "K_N2": KN2.nnz, "K_N3": KN3.nnz}
+        self.nnz_full = dict(zip(("K_L", "K_N1", "K_N2", "K_N3"),
+                                 (int(x) for x in arrays["nnz_full"])))
         self.KL, self.KN2 = _csr(KL, "baij"), _csr(KN2)
         self.KN3, self.R = _csr(KN3, "sbaij"), _csr(R)
         self.nnz = {k: int(m.getInfo()["nz_used"]) for k, m in

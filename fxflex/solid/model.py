@@ -63,6 +63,7 @@ class SolidModel:
         self._locate_centerline()
         self.rho = scene.material.rho
         self._root_sections: dict = {}
+        self._tip_face = None
 
     # -- geometry --------------------------------------------------------------------------------
     def _locate_centerline(self) -> None:
@@ -118,6 +119,11 @@ class SolidModel:
 
     def mass_form(self):
         return forms.mass(self.rho, self.u_trial, self.u_test, self.dx)
+
+    def lumped_mass_form(self):
+        """Row sums of the consistent mass (Eq. 29): int rho N_a, per component."""
+        ones = fem.Constant(self.mesh, np.ones(3))
+        return self.rho * ufl.inner(ones, self.u_test) * self.dx
 
     def mass_P_form(self):
         return forms.mass_P(self.rho, self.u_trial, self.u_test, self.dx)
@@ -184,11 +190,36 @@ class SolidModel:
 
     # -- probe ------------------------------------------------------------------------------------
     def tip_displacement(self, array: np.ndarray) -> np.ndarray:
-        """Displacement of the tip section centre from an owned-part array (3 per node)."""
-        local = np.zeros(3)
+        """Displacement of the tip section centre from an owned-part array (3 per node), or (3, k)
+        from an (n_owned, k) array."""
+        local = np.zeros((3,) + array.shape[1:], dtype=array.dtype)
         if self.tip_node is not None:
             local[:] = array[3 * self.tip_node: 3 * self.tip_node + 3]
         return self.comm.allreduce(local)
+
+    def tip_section(self, X: np.ndarray) -> np.ndarray:
+        """(6, k): translation of the tip centre and small rotation of the tip section for each
+        column of owned-entry arrays X (n_owned,) or (n_owned, k), real or complex (mode shapes).
+
+        The rotation is the least-squares rigid fit over the tip face nodes about the centre c:
+        theta = I^-1 sum_i r_i x (u_i - u_c), I = sum_i (|r_i|^2 1 - r_i r_i^T), r_i = X_i - c.
+        Collective on ``comm``."""
+        if self._tip_face is None:
+            ft = self.solid_mesh.facet_tags
+            nodes = fem.locate_dofs_topological(self.V, 2, ft.indices[ft.values == TIP])
+            nodes = nodes[nodes < self.n_owned_nodes]
+            r = self.V.tabulate_dof_coordinates()[nodes] - self.x0_tip
+            inertia = self.comm.allreduce(np.einsum("ij,ij->", r, r) * np.eye(3) - r.T @ r)
+            self._tip_face = (nodes, r, self.comm.allreduce(r.sum(axis=0)),
+                              np.linalg.inv(inertia))
+        nodes, r, r_sum, inertia_inv = self._tip_face
+        X2 = X.reshape(X.shape[0], -1)
+        u = X2.reshape(-1, 3, X2.shape[1])[nodes]                    # (n_face, 3, k)
+        moment = self.comm.allreduce(np.cross(r[:, :, None], u, axis=1).sum(axis=0))
+        centre = self.tip_displacement(X2)
+        theta = inertia_inv @ (moment - np.cross(r_sum[:, None], centre, axis=0))
+        out = np.vstack([centre, theta])
+        return out if X.ndim == 2 else out[:, 0]
 
     def tip_relative(self, array: np.ndarray, phi: float = 0.0) -> np.ndarray:
         """Rotating-frame deflection U = A^T (x0 + u) - x0 of the tip centre for an inertial

@@ -17,6 +17,13 @@ shape integrals of the paper's Appendix become (derivation in docs/reduced.md)
 
 and the GCMS constant matrices are projections of K_L and M on [P_d Phi, S_d Phi, G3_d Phi].
 
+Cache. These projections (a few dense matrices of the basis size, the same on every rank) depend
+on the geometry, material, mesh, external load and mode count, never on the speed or the
+damping, so they are stored on disk (:mod:`fxflex.cache`, kind ``reduced``) under
+:func:`reduced_key`. A build that finds them needs no mesh, assembly or eigensolve; the mesh,
+operators and modes are then built only if something asks for them (``model``, ``data``,
+``modes``: the ``--fields`` writer, tests, studies).
+
 Rotating-frame system. Both methods, written about the rotating frame at constant speed Omega
 (FFRF in its modal coordinates, GCMS in coordinates rotated back with A^T, SPEC section 6), have
 the form
@@ -32,23 +39,28 @@ eigenvalues (growth rate, highest frequency) for both methods.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from mpi4py import MPI
-from petsc4py import PETSc
 
-from fxflex.beam.linear import companion_eigenvalues
+from fxflex import cache
+from fxflex.analysis.linear import DenseStability
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
-from fxflex.solid.model import SolidModel
+
+if TYPE_CHECKING:                   # a cache hit needs neither PETSc nor dolfinx: imported on use
+    from petsc4py import PETSc
+
+    from fxflex.solid.model import SolidModel
 
 __all__ = ["nodal", "mat_apply", "inner", "tip_rows", "MeshData", "mesh_data",
            "AffineStack", "RotatingSystem", "ReducedFormulation", "ModalFieldWriter",
-           "rotation_weights",
-           "ab2_root"]
+           "rotation_weights", "ab2_root", "reduced_key", "load_reduced", "save_reduced"]
 
 
 # -- distributed projections ----------------------------------------------------------------------
@@ -80,10 +92,7 @@ def inner(comm, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
 
 def tip_rows(model: SolidModel, X: np.ndarray) -> np.ndarray:
     """(3, k): the tip-centre displacement of each column of X, on every rank."""
-    local = np.zeros((3,) + X.shape[1:])
-    if model.tip_node is not None:
-        local[:] = X[3 * model.tip_node: 3 * model.tip_node + 3]
-    return model.comm.allreduce(local)
+    return model.tip_displacement(X)
 
 
 @dataclass
@@ -123,6 +132,41 @@ def mesh_data(model: SolidModel) -> MeshData:
                     timings={"assemble": time.perf_counter() - t0})
 
 
+# -- cache of the projections ---------------------------------------------------------------------
+
+def reduced_key(scene: Scene, method: str, count: int, **extra) -> str:
+    """Cache key of ``method``'s projections on ``count`` clamped modes of ``scene``'s mesh: mesh
+    key, material, load, count, ``extra`` (e.g. the Gram cut) and the producing source (the
+    quadrature degree is SolidModel's default, covered by its source)."""
+    from fxflex.mesh.solid import mesh_key
+    from fxflex.solid.cms import CODE_MODULES
+
+    load = scene.load
+    return cache.entry_key({
+        "kind": method, "mesh": mesh_key(scene.geometry, scene.mesh.solid),
+        "material": dataclasses.asdict(scene.material),
+        "load": {"line_load": load.line_load, "tip_force": list(load.tip_force)},
+        "count": int(count), **extra,
+        "code": cache.code_version(*CODE_MODULES, __name__, f"fxflex.solid.{method}")})
+
+
+def load_reduced(key: str, cls, comm):
+    """The dataclass ``cls`` stored under ``key``, or None (on every rank unless all read it)."""
+    data = cache.load("reduced", key)
+    obj = None
+    names = [f.name for f in dataclasses.fields(cls)]
+    if data is not None and set(names) <= set(data):
+        obj = cls(**{n: (float(data[n]) if data[n].ndim == 0 else data[n]) for n in names})
+    return obj if comm.allreduce(obj is not None, op=MPI.LAND) else None
+
+
+def save_reduced(key: str, obj, comm) -> None:
+    """Store a dataclass of arrays and floats (replicated on every rank) from rank 0."""
+    if comm.rank == 0:
+        cache.save("reduced", key, {f.name: getattr(obj, f.name)
+                                    for f in dataclasses.fields(obj)})
+
+
 # -- the small dense system ------------------------------------------------------------------------
 
 class AffineStack:
@@ -157,9 +201,10 @@ class RotatingSystem:
     f: np.ndarray       # external load after the ramp
     n: np.ndarray       # centrifugal load per unit Omega^2
     tip: np.ndarray     # (3, k): tip-centre deflection in O-XYZ per unit z
+    section: np.ndarray  # (6, k): tip-centre translation and tip-section rotation per unit z
 
 
-class ReducedFormulation:
+class ReducedFormulation(DenseStability):
     """Common part of FFRF and GCMS: state layout, linearisation, eigenvalues, steady state.
 
     Subclasses set ``dof``, ``rot`` (:class:`RotatingSystem`) and the three operators of
@@ -176,9 +221,9 @@ class ReducedFormulation:
         self.drive = Drive(scene.rotation)
         self.c_rho = scene.damping.c / scene.material.rho
         self.absolute = scene.damping.model == "absolute"
-        self.constant_speed = scene.rotation.profile == "constant"
+        # at rest (0 rpm) a spin-up is no spin-up: every rotation term is identically zero
+        self.constant_speed = scene.rotation.profile == "constant" or self.drive.at_rest
         self.timings: dict[str, float] = {}
-        self._eig = None
         self._root_map: np.ndarray | None = None
 
     # -- Formulation interface ---------------------------------------------------------------
@@ -226,17 +271,10 @@ class ReducedFormulation:
             K = K + self.c_rho * w * r.G
         return eye, C, K
 
-    def eigenvalues(self) -> np.ndarray:
-        """Eigenvalues of the linearised rotating system (SPEC section 6, Eq. 59-64)."""
-        if self._eig is None:
-            self._eig = companion_eigenvalues(*self.linearise())
-        return self._eig
-
-    def growth_rate(self) -> tuple[float, float]:
-        """(Re lambda_max, |Im lambda| of that root) of the linearised rotating system."""
-        lam = self.eigenvalues()
-        i = int(np.argmax(lam.real))
-        return float(lam[i].real), float(abs(lam[i].imag))
+    def mode_tip(self, X: np.ndarray) -> np.ndarray:
+        """(6, k) tip translation and rotation (O-XYZ) of rotating-frame mode vectors X (k, ...)
+        in the coordinates z of :class:`RotatingSystem`."""
+        return self.rot.section @ X
 
     def omega_max(self) -> float:
         """Highest circular frequency max |lambda| of the linearised rotating system (rad/s)."""
@@ -252,11 +290,6 @@ class ReducedFormulation:
         rate = np.log(ab2_root(dt * lam)) / dt
         i = int(np.argmax(rate))
         return float(rate[i]), float(abs(lam[i]))
-
-    def stable(self, steady: SteadyState | None = None) -> bool:
-        """No eigenvalue with positive real part (beyond round-off of the eigensolver)."""
-        rate, _ = self.growth_rate()
-        return bool(rate <= 1e-9 * self.omega_max())
 
     def steady_state(self) -> SteadyState:
         """(K_r - Omega^2 N_r [+ (c/rho) Omega G_r]) z = f_r + Omega^2 n_r at the scene's speed
@@ -296,23 +329,60 @@ class ReducedFormulation:
         return self.model.shape.axial_stress(
             0.0, self._root_map @ self.rotating_coordinates(t, q))
 
-    # -- helpers for subclasses ------------------------------------------------------------------
-    def _solid_and_modes(self, count: int, model: SolidModel | None, data: MeshData | None,
-                         modes=None) -> np.ndarray:
-        """Mesh, assembled operators and ``count`` clamped modes, reusing whatever is passed;
-        returns the first ``count`` modes (n_owned, count). Collective on the build comm."""
-        from fxflex.solid.cms import clamped_modes
-
+    # -- mesh, operators and modes: built when first asked for ------------------------------------
+    def _use(self, count: int, model: SolidModel | None, data: MeshData | None, modes) -> bool:
+        """Take whatever the caller passes; the rest is built on demand (collective on the build
+        comm). True when nothing was passed, so the projections may come from the cache."""
         if modes is not None and modes.count < count:
             raise ValueError(f"need {count} clamped modes, got {modes.count}")
-        self.model = model or SolidModel(self.scene, self.build_comm)
-        self.timings["mesh"] = self.model.timings.get("mesh", 0.0) if model is None else 0.0
-        self.data = data or mesh_data(self.model)
-        self.timings["assemble"] = self.data.timings["assemble"] if data is None else 0.0
+        self._count = count
+        self._model, self._data, self._modes = model, data, modes
+        return model is None and data is None and modes is None and cache.enabled("reduced")
+
+    @property
+    def model(self) -> SolidModel:
+        from fxflex.solid.model import SolidModel
+
+        if self._model is None:
+            self._model = SolidModel(self.scene, self.build_comm)
+            self.timings["mesh"] = self._model.timings.get("mesh", 0.0)
+        return self._model
+
+    @property
+    def data(self) -> MeshData:
+        if self._data is None:
+            self._data = mesh_data(self.model)
+            self.timings["assemble"] = self._data.timings["assemble"]
+        return self._data
+
+    @property
+    def modes(self):
+        """The clamped modes (at least the first ``count``)."""
+        from fxflex.solid.cms import clamped_modes
+
+        if self._modes is None:
+            t0 = time.perf_counter()
+            d = self._data
+            self._modes = clamped_modes(self.model, self._count, K=d.K if d else None,
+                                        M=d.M if d else None)
+            self.timings["eigenmodes"] = time.perf_counter() - t0
+        return self._modes
+
+    def _projections(self, key: str | None, cls, project):
+        """``cls`` from the cache under ``key``, else ``project(model, data, Phi)`` (stored)."""
         t0 = time.perf_counter()
-        self.modes = modes or clamped_modes(self.model, count, K=self.data.K, M=self.data.M)
-        self.timings["eigenmodes"] = time.perf_counter() - t0
-        return self.modes.vectors[:, :count]
+        out = load_reduced(key, cls, self.build_comm) if key else None
+        if out is not None:
+            self.timings["cache_load"] = time.perf_counter() - t0
+            return out
+        data = self.data                       # assembled first: the eigensolve reuses K, M
+        Phi = self.modes.vectors[:, : self._count]
+        t1 = time.perf_counter()
+        out = project(self.model, data, Phi)
+        self.timings["invariants"] = time.perf_counter() - t1
+        if key:
+            save_reduced(key, out, self.build_comm)
+        return out
 
     def _drive_state(self, t: float) -> tuple[float, float, float]:
         return self.drive.state(t)

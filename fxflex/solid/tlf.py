@@ -26,15 +26,12 @@ Transient (Eq. 35), inertial frame, nodal displacements u = x - x0 (Eq. 25) as u
 
 Steady state (SPEC section 6, NOTES.md): in the rotating frame, with U = A^T x - x0,
 
-    int S(E(U)) : dE dV - Omega^2 int rho P (X0 + U) . dU dV [+ c Omega int (S U) . dU dV] = F . dU,
-
-the bracket being the absolute damping model's circulatory force (Eq. 68 at rest in the rotating
-frame: -c d(A U)/dt = -c A (U' + Omega S U) with U' = 0; SPEC section 5; the relative model has
-no damping force at equilibrium),
+    int S(E(U)) : dE dV - Omega^2 int rho P (X0 + U) . dU dV = F . dU,
 
 St.Venant-Kirchhoff material, the centrifugal load acting on the deformed position, solved by
 Newton's method with the Jacobian from ``ufl.derivative`` (geometric stiffness and spin softening
-included). Above the speed where the unstressed K_L - Omega^2 M_P loses definiteness the first
+included). The absolute damping model adds its circulatory (c/rho) Omega int rho (S U) . dU (Eq. 68
+seen from the hub, SPEC section 5), non-symmetric: Newton then factorises with LU. Above the speed where the unstressed K_L - Omega^2 M_P loses definiteness the first
 Newton step would follow the unstable linear mode, so the speed is raised in stages (continuation
 in Omega^2), each stage starting from the previous equilibrium.
 """
@@ -43,6 +40,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 import ufl
@@ -55,7 +53,10 @@ from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import rotation_z
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel, solid_dof_count
-from fxflex.solid.petsc import direct_solver, newton
+from fxflex.solid.petsc import direct_solver, make_direct, newton
+
+if TYPE_CHECKING:
+    from fxflex.solid.rotating import Linearisation
 
 __all__ = ["TLF", "UflForce", "FieldWriter", "build", "dof_count", "tlf_steady", "largest_frequency",
            "DEFAULT_MASS"]
@@ -75,6 +76,14 @@ KERNEL_FLAGS = ["-O2", "-march=native", "-fno-math-errno", "-fno-trapping-math",
 DEFAULT_MASS = "lumped"
 
 
+#: lowest eigenvalue pairs behind ``stable()`` and ``growth_rate()``
+STABILITY_PAIRS = 8
+#: a root counts as growing when Re lambda > this x max|lambda| of the computed roots: the PEP
+#: converges to a relative residual of 1e-10, so a purely imaginary root of the undamped system
+#: comes out with a real part of about that size
+PEP_STABILITY_RTOL = 1e-8
+
+
 def dof_count(scene: Scene) -> int:
     return solid_dof_count(scene)
 
@@ -90,10 +99,10 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
     R = (forms.svk_residual(model.scene.material, U, v, model.dx)
          - w2 * forms.centrifugal(model.rho, model.X0 + U, v, model.dx))
     damping = model.scene.damping
-    absolute = damping.model == "absolute" and damping.c > 0.0
-    if absolute:                       # (c / rho) Omega int rho (S U) . v: not symmetric
-        wc = fem.Constant(model.mesh, 0.0)
-        R = R + wc * forms.mass_S(model.rho, U, v, model.dx)
+    absolute = damping.model == "absolute" and damping.c > 0
+    if absolute:                    # the circulatory (c/rho) Omega M_S U of Eq. 68 (SPEC 5)
+        w1 = fem.Constant(model.mesh, 0.0)
+        R = R + w1 * (damping.c / model.rho) * forms.mass_S(model.rho, U, v, model.dx)
     J = ufl.derivative(R, U, du)
     F_ext = model.rotating_load()
     t_setup = time.perf_counter() - t0
@@ -103,7 +112,7 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
     for k in range(1, stages + 1):
         w2.value = omega**2 * k / stages
         if absolute:
-            wc.value = damping.c / model.rho * omega * math.sqrt(k / stages)
+            w1.value = math.sqrt(w2.value)
         res = newton(R, J, U, [model.bc], rhs=F_ext, rtol=rtol, max_it=max_it,
                      symmetric=not absolute)
         residuals = res.residuals
@@ -176,12 +185,15 @@ class TLF:
         self.dof = self.model.dof
         self.force_eval = options.force_eval or FORCE_EVAL["tlf"][0]
         self.mass_kind = options.mass or DEFAULT_MASS
-        self.hub_frame = hub_frame
         self.drive = Drive(scene.rotation)
+        # at rest A = I: the hub-frame turn of the force (below) would multiply by identities
+        self.hub_frame = hub_frame and not self.drive.at_rest
         self.timings = dict(self.model.timings)
         self._dyn: _Dynamics | None = None
         self._omega_max: float | None = None
         self._root: tuple | None = None
+        self._steady: SteadyState | None = None
+        self._modes: tuple[np.ndarray, np.ndarray] | None = None
         if not options.need_steady:
             self._dyn = _Dynamics(self)
         self.timings["build"] = time.perf_counter() - t0
@@ -194,7 +206,9 @@ class TLF:
 
     # -- Formulation interface --------------------------------------------------------------------
     def steady_state(self) -> SteadyState:
-        return tlf_steady(self.model)
+        if self._steady is None:
+            self._steady = tlf_steady(self.model)
+        return self._steady
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
         """u = 0, u' = phi'(0) S x0: the undeformed body in rigid rotation (NOTES.md)."""
@@ -238,8 +252,11 @@ class TLF:
                 d.ksp.solve(d.b, d.x)
                 out[j::3] = x_arr
         if d.c_rho > 0.0:                        # M^-1 D = c / rho
-            d.damped_rate(dphi, c, s, q, v)
-            _axpy(-d.c_rho, d.y, out)
+            if dphi == 0.0:                      # not turning: both models damp u'
+                _axpy(-d.c_rho, v, out)
+            else:
+                d.damped_rate(dphi, c, s, q, v)
+                _axpy(-d.c_rho, d.y, out)
         out[d.root] = d.root_combination(alpha, beta)
 
     def tip(self, t: float, q: np.ndarray) -> np.ndarray:
@@ -274,7 +291,7 @@ class TLF:
     def root_stress(self, t: float, q: np.ndarray) -> np.ndarray:
         """sigma_X (Pa) at the four corners of the root section: the resultants of the SVK
         stress (Eq. 30-33) in the root cells on U = A^T (x0 + u) - x0 (the steady state's q is U
-        itself, at t = 0), spread linearly over the section (:mod:`fxflex.solid.section`).
+        itself, at phi = 0), spread linearly over the section (:mod:`fxflex.solid.section`).
         Collective on ``comm``."""
         if self._root is None:
             self._root = (self.model.root_section("svk"), self.model.node_coordinates())
@@ -291,6 +308,63 @@ class TLF:
         u.x.scatter_forward()
         R = forms.svk_residual(self.scene.material, u, self.model.u_test, self.model.dx)
         return self.model.matrix(ufl.derivative(R, u, self.model.u_trial), bcs=[])
+
+    # -- linearised motion about the steady state (SPEC section 6) --------------------------------
+    def linearise(self, steady: SteadyState | None = None) -> Linearisation:
+        """(M, C, K) of the motion about the rotating equilibrium as PETSc matrices on the free
+        coordinates, with the mass in use (:mod:`fxflex.solid.rotating`). Collective."""
+        from fxflex.solid.rotating import tlf_linearisation
+
+        st = steady or self.steady_state()
+        sc = self.scene
+        return tlf_linearisation(self.model, st.q, sc.rotation.omega,
+                                 sc.damping.c / sc.material.rho, sc.damping.model == "absolute",
+                                 self.mass_kind)
+
+    def rotating_modes(self, pairs: int, steady: SteadyState | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """The ``pairs`` lowest roots of the linearised rotating system, one per conjugate pair,
+        lowest frequency first, and their mode vectors on this rank's free coordinates (SLEPc
+        PEP, :mod:`fxflex.analysis.petsc`). Collective. At least STABILITY_PAIRS are computed
+        and kept, so that ``stable()`` after it costs nothing."""
+        from fxflex.analysis.linear import conjugate_pairs
+        from fxflex.analysis.petsc import pep_eigen
+
+        if self._modes is None or self._modes[0].size < pairs:
+            count = max(pairs, STABILITY_PAIRS)
+            lin = self.linearise(steady)
+            lam, X, _ = pep_eigen(lin.M, lin.C, lin.K, count)
+            keep = conjugate_pairs(lam)[:count]
+            lin.destroy()
+            self._modes = (lam[keep], X[:, keep])
+        lam, X = self._modes
+        return lam[:pairs], X[:, :pairs]
+
+    def mode_tip(self, X: np.ndarray) -> np.ndarray:
+        """(6, k) tip translation and section rotation of mode vectors on the free coordinates
+        (:meth:`SolidModel.tip_section`). Collective."""
+        from fxflex.solid.rotating import free_entries
+
+        full = np.zeros((self.model.n_owned,) + X.shape[1:], dtype=X.dtype)
+        full[free_entries(self.model)] = X
+        return self.model.tip_section(full)
+
+    def eigenvalues(self, steady: SteadyState | None = None) -> np.ndarray:
+        """The STABILITY_PAIRS lowest roots: a rotating beam loses stability through its low
+        modes (a root through zero, or low modes merging); the high ones are damped at about
+        -c/(2 rho) and hardly moved by the rotation."""
+        return self.rotating_modes(STABILITY_PAIRS, steady)[0]
+
+    def growth_rate(self) -> tuple[float, float]:
+        """(Re lambda, |Im lambda|) of the rightmost of the lowest roots (1/s, rad/s)."""
+        from fxflex.analysis.linear import rightmost
+        return rightmost(self.eigenvalues())
+
+    def stable(self, steady: SteadyState | None = None) -> bool:
+        """No growing root among the lowest (:func:`fxflex.analysis.linear.unstable`, with the
+        PEP's own tolerance)."""
+        from fxflex.analysis.linear import unstable
+        return not unstable(self.eigenvalues(steady), rtol=PEP_STABILITY_RTOL)
 
     # -- pieces -----------------------------------------------------------------------------------
     def internal_force(self, q: np.ndarray) -> np.ndarray:
@@ -378,7 +452,7 @@ class _Dynamics:
         t1 = time.perf_counter()
         self.mass = tlf.mass_kind
         if self.mass == "lumped":
-            m = _owned(model.vector(_lumped_mass_form(model), zero_clamped=False), n)
+            m = _owned(model.vector(model.lumped_mass_form(), zero_clamped=False), n)
             self.m_inv = 1.0 / m
         else:
             Mf = model.compile(model.mass_form())
@@ -463,12 +537,6 @@ def _scalar_mass(model: SolidModel) -> PETSc.Mat:
     return model.matrix(fem.form(model.rho * u * v * model.dx), bcs=[bc])
 
 
-def _lumped_mass_form(model: SolidModel):
-    """Row sums of the consistent mass (Eq. 29): int rho N_a, per component."""
-    ones = fem.Constant(model.mesh, np.ones(3))
-    return model.rho * ufl.inner(ones, model.u_test) * model.dx
-
-
 def largest_frequency(model: SolidModel, mass: str, *, tol: float = 1e-8) -> float:
     """w_max = sqrt(lambda_max) of K_L x = lambda M x on the free coordinates (SLEPc).
 
@@ -481,7 +549,7 @@ def largest_frequency(model: SolidModel, mass: str, *, tol: float = 1e-8) -> flo
     K = model.matrix(model.compile(model.stiffness_form()))
     eps = SLEPc.EPS().create(model.comm)
     if mass == "lumped":
-        m = model.vector(_lumped_mass_form(model), zero_clamped=False)
+        m = model.vector(model.lumped_mass_form(), zero_clamped=False)
         owned = m.getArray()                       # ghost slots are not used by the scaling
         owned[:] = 1.0 / np.sqrt(owned)
         owned[(3 * model.root_owned[:, None] + np.arange(3)).reshape(-1)] = 1.0
@@ -494,10 +562,7 @@ def largest_frequency(model: SolidModel, mass: str, *, tol: float = 1e-8) -> flo
         eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
         st = eps.getST()
         st.setType(SLEPc.ST.Type.SHIFT)
-        ksp = st.getKSP()
-        ksp.setType("preonly")
-        ksp.getPC().setType("cholesky")
-        ksp.getPC().setFactorSolverType("mumps")
+        make_direct(st.getKSP())
     eps.setType(SLEPc.EPS.Type.KRYLOVSCHUR)
     eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
     eps.setDimensions(nev=1, ncv=64)

@@ -11,12 +11,27 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["diagnose", "ab2_growth_exponent"]
+import numpy as np
+
+__all__ = ["diagnose", "ab2_growth_exponent", "deviation_growth"]
 
 
 def ab2_growth_exponent(omega: float, h: float, t: float) -> float:
     """ln of the AB2 amplification of an undamped mode omega after time t: w^4 h^3 t / 4."""
     return omega**4 * h**3 * t / 4.0
+
+
+def deviation_growth(history, steady_tip, threshold: float = 100.0) -> tuple[float | None, int]:
+    """(rate, samples): how fast a run leaves an unstable equilibrium -- the slope (1/s) of
+    log |tip - steady| against t over the samples of ``history`` (rows t, tip...) where the
+    deviation exceeds ``threshold`` |steady|, by then a pure exponential of the growing root;
+    None below 3 such samples. Compare with ``growth_rate()``."""
+    h = np.asarray(history, float)
+    dev = np.linalg.norm(h[:, 1:4] - steady_tip, axis=1)
+    late = dev > threshold * np.linalg.norm(steady_tip)
+    if late.sum() < 3:
+        return None, int(late.sum())
+    return float(np.polyfit(h[late, 0], np.log(dev[late]), 1)[0]), int(late.sum())
 
 
 def diagnose(form, integrator: str, dt: float, result) -> dict:

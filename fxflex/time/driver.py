@@ -37,18 +37,22 @@ def divergence_limit(form) -> float:
 
 def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: int = 1,
              on_sample=None, progress=None, limit: float | None = None, keep_history=False,
-             t0: float = 0.0, state: tuple[np.ndarray, np.ndarray] | None = None) -> RunResult:
+             t0: float = 0.0, state: tuple[np.ndarray, np.ndarray] | None = None,
+             extras: bool = True) -> RunResult:
     """Integrate ``form`` from t0 to t_end with step dt.
 
     on_sample(t, tip, extras, q) is called at step 0, every ``sample_every`` steps and at the end
-    (q is the live state array: copy it to keep it).
+    (q is the live state array: copy it to keep it). The formulation's extra outputs (e.g. the
+    drive torque, which costs an acceleration evaluation) are computed only when someone reads
+    them: ``extras`` is true and there is an ``on_sample`` or a history; else the callback gets ().
     """
     if dt <= 0 or not math.isfinite(dt):
         raise ValueError("dt must be positive")
     limit = divergence_limit(form) if limit is None else limit
     nsteps = max(int(round((t_end - t0) / dt)), 1)
     q, v = form.initial_state() if state is None else state
-    extras = getattr(form, "extras", None)
+    wanted = extras and (on_sample is not None or keep_history)
+    extras = getattr(form, "extras", None) if wanted else None
     history = []
 
     def sample(k: int) -> np.ndarray:

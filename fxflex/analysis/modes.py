@@ -1,0 +1,326 @@
+"""Modes of the motion about the rotating steady state, for every method (SPEC sections 6 and 8).
+
+Each formulation offers ``rotating_modes(pairs)`` -> the lowest roots lambda of
+(lambda^2 M + lambda C + K) x = 0, one per conjugate pair, and their mode vectors (dense
+companion form for the reduced and beam models, :mod:`fxflex.analysis.linear`; SLEPc PEP for TLF,
+:mod:`fxflex.analysis.petsc`), and ``mode_tip(X)`` -> the tip section's translation and rotation in
+each mode. From them: the frequency |Im lambda| / 2 pi (0 for a real root), the growth rate
+Re lambda and a direction label
+
+- ``axial``: the tip moves mostly along X,
+- ``in-plane``: along Y (in the plane of rotation),
+- ``out-of-plane``: along Z (the rotation axis, the load direction),
+- ``torsion``: the section turns about X,
+
+whichever of |U_X|, |U_Y|, |U_Z| and r |theta_X| is largest, r the polar radius of gyration
+sqrt((b^2 + h^2) / 12) of the tip section (the mean displacement of the section's points when it
+turns by theta_X). Mode vectors are complex (gyroscopic coupling); the moduli compare amplitudes.
+
+A Campbell diagram repeats this over a range of speeds (:func:`campbell`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from fxflex.scene import Scene
+
+__all__ = ["LABELS", "Modes", "direction_labels", "tip_radius", "modes_of", "speed_builder",
+           "campbell", "CampbellData", "plot_campbell", "parse_range"]
+
+LABELS = ("axial", "in-plane", "out-of-plane", "torsion")
+
+
+@dataclass
+class Modes:
+    """Lowest modes about the rotating equilibrium at one speed, lowest frequency first."""
+
+    rpm: float
+    eigenvalues: np.ndarray         # (k,) complex, Im >= 0
+    tip: np.ndarray                 # (6, k) complex tip translation and rotation per mode
+    labels: list[str]
+    stable: bool                    # the formulation's verdict (stable())
+    seconds: float = 0.0
+
+    @property
+    def frequencies_hz(self) -> np.ndarray:
+        return np.abs(self.eigenvalues.imag) / (2.0 * math.pi)
+
+    @property
+    def growth_rates(self) -> np.ndarray:
+        return self.eigenvalues.real
+
+    def to_dict(self) -> dict:
+        """The SPEC section 8 fields: equal-length lists, one entry per conjugate pair."""
+        return {"rpm": self.rpm, "frequencies_hz": self.frequencies_hz.tolist(),
+                "growth_rates": self.growth_rates.tolist(), "labels": list(self.labels),
+                "stable": self.stable}
+
+
+def direction_labels(tip: np.ndarray, radius: float) -> list[str]:
+    """One label per column of the (6, k) tip motion (module docstring)."""
+    amp = np.abs(np.vstack([tip[:3], radius * tip[3:4]]))
+    return [LABELS[i] for i in np.argmax(amp, axis=0)]
+
+
+def tip_radius(scene: Scene) -> float:
+    """Polar radius of gyration of the tip section, sqrt((b^2 + h^2) / 12)."""
+    g = scene.geometry
+    return math.sqrt((g.tip_y**2 + g.tip_z**2) / 12.0)
+
+
+def modes_of(form, pairs: int) -> Modes:
+    """The ``pairs`` lowest modes of a built formulation at its scene's speed. Collective for
+    TLF (every rank of its communicator must call)."""
+    t0 = time.perf_counter()
+    lam, X = form.rotating_modes(pairs)
+    tip = form.mode_tip(X)
+    labels = direction_labels(tip, tip_radius(form.scene))
+    return Modes(rpm=form.scene.rotation.rpm, eigenvalues=lam, tip=tip, labels=labels,
+                 stable=form.stable(), seconds=time.perf_counter() - t0)
+
+
+def speed_builder(method: str, scene: Scene, comm, options=None):
+    """``build_at(rpm)``: the formulation of ``scene`` at another speed. FFRF and GCMS share the
+    first build's mesh, operators and clamped modes (they do not depend on the speed); the others
+    are built afresh (beams: milliseconds; TLF: the mesh comes from the cache)."""
+    from fxflex.formulation import build
+
+    first = []
+
+    def build_at(rpm: float):
+        sc = scene.replace(**{"rotation.rpm": float(rpm)})
+        if first and method in ("ffrf", "gcms"):
+            f0 = first[0]
+            return type(f0)(sc, comm, options, model=f0.model, data=f0.data, modes=f0.modes)
+        form = build(method, sc, comm, options)
+        if not first:
+            first.append(form)
+        return form
+
+    return build_at
+
+
+# -- Campbell diagram -------------------------------------------------------------------------------
+
+def parse_range(text: str) -> tuple[float, float, int]:
+    """``RPM_MIN:RPM_MAX:COUNT`` -> (min, max, count); ValueError naming what is wrong."""
+    parts = text.split(":")
+    if len(parts) != 3:
+        raise ValueError(f"expected RPM_MIN:RPM_MAX:COUNT, got {text!r}")
+    try:
+        lo, hi, count = float(parts[0]), float(parts[1]), int(parts[2])
+    except ValueError:
+        raise ValueError(f"expected two numbers and an integer, got {text!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi)) or lo < 0 or hi <= lo or count < 2:
+        raise ValueError(f"need 0 <= RPM_MIN < RPM_MAX and COUNT >= 2, got {text!r}")
+    return lo, hi, count
+
+
+@dataclass
+class CampbellData:
+    method: str
+    rpm: np.ndarray                 # (s,)
+    modes: list[Modes]
+
+    def table(self) -> tuple[np.ndarray, np.ndarray, list[list[str]]]:
+        """(frequencies_hz (s, k), growth_rates (s, k), labels) padded with NaN / '' where a
+        speed has fewer modes."""
+        k = max(len(m.labels) for m in self.modes)
+        f = np.full((len(self.modes), k), np.nan)
+        g = np.full((len(self.modes), k), np.nan)
+        labels = []
+        for i, m in enumerate(self.modes):
+            n = len(m.labels)
+            f[i, :n], g[i, :n] = m.frequencies_hz, m.growth_rates
+            labels.append(list(m.labels) + [""] * (k - n))
+        return f, g, labels
+
+    def unstable_ranges(self) -> list[tuple[float, float]]:
+        """Speed intervals around the unstable samples, bounded halfway to the stable
+        neighbours (the sampling's resolution)."""
+        rpm = self.rpm
+        bad = [not m.stable for m in self.modes]
+        edges = np.concatenate([[rpm[0]], 0.5 * (rpm[1:] + rpm[:-1]), [rpm[-1]]])
+        out = []
+        for i, b in enumerate(bad):
+            if not b:
+                continue
+            lo, hi = edges[i], edges[i + 1]
+            if out and math.isclose(out[-1][1], lo):
+                out[-1] = (out[-1][0], hi)
+            else:
+                out.append((lo, hi))
+        return [(float(a), float(b)) for a, b in out]
+
+
+def campbell(build_at, speeds, pairs: int, progress=None) -> list[Modes]:
+    """Modes at each speed; ``build_at(rpm)`` returns the formulation for that speed and
+    ``progress(i, modes)`` is called after each."""
+    out = []
+    for i, rpm in enumerate(speeds):
+        modes = modes_of(build_at(float(rpm)), pairs)
+        out.append(modes)
+        if progress is not None:
+            progress(i, modes)
+    return out
+
+
+_COLOURS = {"axial": "tab:green", "in-plane": "tab:blue", "out-of-plane": "tab:orange",
+            "torsion": "tab:purple"}
+
+
+def plot_campbell(data: CampbellData, path: str) -> None:
+    """Frequencies against speed, coloured by direction, the 1x and 2x rotation lines, and the
+    speed ranges where the equilibrium is unstable shaded (PNG, matplotlib Agg)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    f, g, labels = data.table()
+    fig, ax = plt.subplots(figsize=(7.5, 5.0))
+    for lo, hi in data.unstable_ranges():
+        ax.axvspan(lo, hi, color="tab:red", alpha=0.15, lw=0)
+    # thin lines join the j-th lowest mode of each direction from speed to speed; past a
+    # divergence speed an oscillating pair becomes two real roots +-a (0 Hz), of which only the
+    # growing one continues the branch, so that the count stays aligned
+    for lab in LABELS:
+        branch = np.full_like(f, np.nan)
+        for i in range(f.shape[0]):
+            row = [f[i, j] for j in range(f.shape[1])
+                   if labels[i][j] == lab and (f[i, j] > 0 or g[i, j] > 0)]
+            branch[i, : len(row)] = row
+        for j in range(branch.shape[1]):
+            ax.plot(data.rpm, branch[:, j], color=_COLOURS[lab], alpha=0.4, lw=0.8, zorder=1)
+    seen = set()
+    for i, rpm in enumerate(data.rpm):
+        for j, lab in enumerate(labels[i]):
+            if not lab:
+                continue
+            growing = g[i, j] > 0
+            ax.scatter(rpm, f[i, j], s=22 if growing else 14, marker="x" if growing else "o",
+                       color="tab:red" if growing else _COLOURS[lab], zorder=3,
+                       label=None if (lab, growing) in seen else
+                       (f"{lab}, growing" if growing else lab))
+            seen.add((lab, growing))
+    top = np.nanmax(f) if np.isfinite(f).any() else 1.0
+    ax.plot(data.rpm, data.rpm / 60.0, "k--", lw=1, label="1x rotation")
+    ax.plot(data.rpm, 2 * data.rpm / 60.0, "k:", lw=1, label="2x rotation")
+    ax.set_ylim(0, 1.05 * max(top, 2 * data.rpm[-1] / 60.0))
+    ax.set_xlim(data.rpm[0], data.rpm[-1])
+    ax.set_xlabel("hub speed (rpm)")
+    ax.set_ylabel("frequency in the rotating frame (Hz)")
+    ax.set_title(f"Campbell diagram, {data.method.upper()} (shaded: unstable equilibrium)")
+    ax.legend(fontsize=8, loc="upper left")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+# -- the ``fxflex modes`` command -------------------------------------------------------------------
+
+def modes_table(modes: Modes) -> list[str]:
+    lines = ["   #  frequency (Hz)  growth rate (1/s)  direction"]
+    for i, (f, g, lab) in enumerate(zip(modes.frequencies_hz, modes.growth_rates, modes.labels)):
+        lines.append(f"  {i + 1:2d}  {f:14.4f}  {g:+17.6g}  {lab}")
+    return lines
+
+
+def _write_campbell(data: CampbellData, out_dir: str, payload: dict) -> dict[str, str]:
+    import json
+
+    from fxflex.io.report import jsonable
+
+    stem = os.path.join(out_dir, f"campbell_{data.method}")
+    files = {"png": stem + ".png", "csv": stem + ".csv", "json": stem + ".json"}
+    plot_campbell(data, files["png"])
+    with open(files["csv"], "w") as fh:
+        fh.write("rpm,mode,frequency_hz,growth_rate_1_s,label,stable\n")
+        for m in data.modes:
+            for j, (f, g, lab) in enumerate(zip(m.frequencies_hz, m.growth_rates, m.labels)):
+                fh.write(f"{m.rpm:g},{j + 1},{f:.10g},{g:.10g},{lab},{m.stable}\n")
+    with open(files["json"], "w") as fh:
+        json.dump(jsonable({**payload, "files": files}), fh, indent=1)
+    return files
+
+
+def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spec: str | None,
+              out_dir: str | None) -> tuple[dict, str]:
+    """``fxflex modes``: (JSON payload with the envelope, human-readable text). Files go to
+    ``out_dir`` from rank 0: the Campbell PNG, CSV and JSON, or ``modes_<method>.json``."""
+    from fxflex.errors import FxflexError
+    from fxflex.formulation import build
+    from fxflex.io import envelope
+
+    speeds = None
+    if campbell_spec is not None:
+        try:
+            lo, hi, count = parse_range(campbell_spec)
+        except ValueError as exc:
+            raise FxflexError(f"--campbell: {exc}") from None
+        speeds = np.linspace(lo, hi, count)
+    if out_dir is not None and os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise FxflexError(f"--out: {out_dir} exists and is not a directory")
+    damping = {"c": scene.damping.c, "model": scene.damping.model}
+    if speeds is None:
+        t0 = time.perf_counter()
+        form = build(method, scene, comm, options)
+        t1 = time.perf_counter()
+        modes = modes_of(form, pairs)
+        timings = {"preprocess": t1 - t0, "solve": time.perf_counter() - t1}
+        payload = envelope(scene, method=method, dof=form.dof,
+                           damping=damping, n=len(modes.labels), **modes.to_dict(),
+                           timings_s=timings)
+        text = [f"{method} modes about the steady state at {scene.rotation.rpm:g} rpm (dof "
+                f"{form.dof}, damping c = {scene.damping.c:g} {scene.damping.model})",
+                *modes_table(modes),
+                f"  stable: {modes.stable}   preprocess {timings['preprocess']:.2f} s, "
+                f"steady state + eigenvalues {timings['solve']:.2f} s"]
+        if out_dir is not None and comm.rank == 0:
+            import json
+            os.makedirs(out_dir, exist_ok=True)
+            path = os.path.join(out_dir, f"modes_{method}.json")
+            with open(path, "w") as fh:
+                json.dump(payload, fh, indent=1)
+            text.append(f"  written: {path}")
+        return payload, "\n".join(text)
+
+    def progress(i, m):
+        if comm.rank == 0:
+            f = m.frequencies_hz
+            sys.stderr.write(f"  {method} {m.rpm:8.1f} rpm ({i + 1}/{len(speeds)}): lowest "
+                             f"{f[0]:.2f} Hz, max growth {m.growth_rates.max():+.4g} 1/s, "
+                             f"{'stable' if m.stable else 'UNSTABLE'}  {m.seconds:.1f} s\n")
+            sys.stderr.flush()
+
+    if comm.rank == 0:
+        sys.stderr.write(f"fxflex modes: {method} Campbell diagram, {len(speeds)} speeds from "
+                         f"{speeds[0]:g} to {speeds[-1]:g} rpm, {pairs} modes each\n")
+    t0 = time.perf_counter()
+    modes = campbell(speed_builder(method, scene, comm, options), speeds, pairs, progress)
+    data = CampbellData(method, speeds, modes)
+    ranges = data.unstable_ranges()
+    payload = envelope(scene, method=method, damping=damping, n=pairs, campbell={
+        "rpm": speeds.tolist(), "frequencies_hz": [m.frequencies_hz.tolist() for m in modes],
+        "growth_rates": [m.growth_rates.tolist() for m in modes],
+        "labels": [m.labels for m in modes], "stable": [m.stable for m in modes],
+        "unstable_rpm": ranges}, timings_s={"total": time.perf_counter() - t0})
+    files = {}
+    if comm.rank == 0:
+        os.makedirs(out_dir, exist_ok=True)
+        files = _write_campbell(data, out_dir, payload)
+    files = comm.bcast(files, root=0)
+    payload["files"] = files
+    text = [f"{method} Campbell diagram, {len(speeds)} speeds, {pairs} modes each "
+            f"({payload['timings_s']['total']:.1f} s)",
+            "  unstable equilibrium: " + (", ".join(f"{a:g}-{b:g} rpm" for a, b in ranges)
+                                          if ranges else "nowhere in the range"),
+            *(f"  {k}: {v}" for k, v in files.items())]
+    return payload, "\n".join(text)
