@@ -243,10 +243,10 @@ def _efficiency(r) -> list[str]:
     if not eff:
         return []
     return ["## 6. Efficiency spot check (Sect. 4.2)", "",
-            "Time per step of the paper's integrator and step with system invariant matrices "
-            "and without them (TLF: the UFL residual assembled every step, the per-step "
-            "integration of Eq. 65; NEBB: Eq. 66; ANCF: element invariant matrices), a short "
-            "run each on a shared machine. `fxflex bench paper` gives the paper's Tables 3-6.",
+            "CPU time per step of the paper's integrator and step with system invariant "
+            "matrices and without them (TLF: the UFL residual assembled every step, the "
+            "per-step integration of Eq. 65; NEBB: Eq. 66; ANCF: element invariant matrices), "
+            "best of three short runs each. `fxflex bench paper` gives the paper's Tables 3-6.",
             "", *_table(["method", "integrator", "invariant ms/step", "without ms/step",
                          "ratio"],
                         [[m, e["integrator"], f"{e['invariant_ms']:.3f}",
