@@ -26,7 +26,8 @@ __all__ = ["main"]
 log = logging.getLogger("fxflex")
 
 
-BENCHES = ("steady", "tlf", "reduced", "beams", "paper", "accuracy", "stability", "skip")
+BENCHES = ("steady", "tlf", "reduced", "beams", "paper", "accuracy", "stability", "skip",
+           "implicit")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -108,11 +109,14 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--t-end", type=_positive("--t-end"), default=0.01, metavar="T",
                    help="end time (s), default 0.01")
     p.add_argument("--dt", type=_positive("--dt"), metavar="DT",
-                   help="time step (s); default: the paper's step for the method/integrator")
+                   help="time step (s); default: the paper's step for ab2/cd; for "
+                        "generalized-alpha 20e-6 (tlf 10e-6) up to 1000 rpm, scaled by "
+                        "(1000/rpm)^1.5 above, not below 4e-6 (docs/implicit.md)")
     p.add_argument("--integrator", choices=("ab2", "cd", "generalized-alpha"),
                    help="default: the paper's (ab2 for ffrf gcms lebb nebb, cd for tlf ancf)")
-    p.add_argument("--rho-inf", type=_number("--rho-inf"), default=0.9, metavar="X",
-                   help="generalized-alpha spectral radius at infinity, default 0.9")
+    p.add_argument("--rho-inf", type=_number("--rho-inf"), metavar="X",
+                   help="generalized-alpha: spectral radius at infinity in [0, 1] (1: no "
+                        "numerical damping), default 0.9")
     p.add_argument("--force-eval", choices=("ufl", "invariant", "element"),
                    help="internal force route: tlf ufl|invariant, nebb/ancf invariant|element")
     p.add_argument("--mass", choices=("consistent", "lumped"), help="tlf mass matrix")
@@ -260,7 +264,21 @@ def cmd_run(args, comm) -> None:
     scene = _scene_from_args(args)
     options = BuildOptions(force_eval=args.force_eval, mass=args.mass, need_steady=False)
     check_options(args.method, options)
-    integrator, dt = default_integration(args.method, args.integrator, args.dt)
+    integrator, dt = default_integration(args.method, args.integrator, args.dt,
+                                         scene.rotation.rpm)
+    rho_inf = None
+    if integrator == "generalized-alpha" and args.dt is None:
+        # the largest step not above the default that ends exactly at --t-end
+        dt = args.t_end / math.ceil(args.t_end / dt * (1.0 - 1e-12))
+    if integrator == "generalized-alpha":
+        from fxflex.time.implicit import DEFAULT_RHO_INF
+        rho_inf = DEFAULT_RHO_INF if args.rho_inf is None else args.rho_inf
+        if not 0.0 <= rho_inf <= 1.0:
+            raise FxflexError(f"--rho-inf: must lie in [0, 1] (spectral radius at infinity), "
+                              f"got {args.rho_inf:g}")
+    elif args.rho_inf is not None:
+        raise FxflexError(f"--rho-inf: only applies to --integrator generalized-alpha "
+                          f"(the integrator is {integrator})")
     for flag in ("out", "fields"):
         path = getattr(args, flag)
         if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
@@ -284,7 +302,8 @@ def cmd_run(args, comm) -> None:
         sample_every = nsteps       # nothing to write: only the final deflection is reported
     extra_cols = list(getattr(form, "extra_columns", []))
     columns = ["t_s", "longitudinal_m", "orthogonal_m", "load_m"] + extra_cols
-    meta = envelope(scene, method=args.method, integrator=integrator, dt_s=dt,
+    implicit = {"rho_inf": rho_inf} if rho_inf is not None else {}
+    meta = envelope(scene, method=args.method, integrator=integrator, dt_s=dt, **implicit,
                     t_end_s=args.t_end, dof=form.dof, force_eval=getattr(form, "force_eval", None),
                     mass=getattr(form, "mass_kind", None))
     writer = SeriesWriter(args.out, meta, columns, enabled=bool(args.out) and comm.rank == 0) \
@@ -304,7 +323,7 @@ def cmd_run(args, comm) -> None:
     try:
         res = simulate(form, integrator, dt, args.t_end, sample_every=sample_every,
                        on_sample=on_sample if writer or fields else None, progress=progress,
-                       extras=writer is not None)
+                       extras=writer is not None, rho_inf=rho_inf)
     finally:
         if writer is not None:
             writer.close()
@@ -312,10 +331,12 @@ def cmd_run(args, comm) -> None:
             fields.close()
     progress.close(f"{res.steps} steps")
     diverged = diagnose(form, integrator, dt, res) if res.diverged else None
+    if rho_inf is not None:
+        implicit["newton"] = res.stats
     stable_fn = getattr(form, "stable", None)     # of the equilibrium at the final speed
     verdict = stable_fn() if callable(stable_fn) else None
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
-                       integrator=integrator, dt_s=dt, t_end_s=args.t_end, t_s=res.t,
+                       integrator=integrator, dt_s=dt, **implicit, t_end_s=args.t_end, t_s=res.t,
                        steps=res.steps, tip_mm=tip_mm(res.tip), stable=verdict,
                        diverged=diverged, series=os.path.abspath(args.out) if args.out else None,
                        timings_s={"preprocess": t_pre, "solve": res.wall_s},
@@ -324,6 +345,10 @@ def cmd_run(args, comm) -> None:
             f"(dof {form.dof})\n  tip: {_fmt_tip(tip_mm(res.tip))}\n"
             f"  preprocess {t_pre:.2f} s, solve {res.wall_s:.2f} s"
             + (f" ({1e6 * res.wall_s / res.steps:.1f} us/step)" if res.steps else ""))
+    if rho_inf is not None:
+        st = res.stats
+        text += (f"\n  generalized-alpha rho_inf {rho_inf:g}: {st['iterations']} Newton iterations, "
+                 f"{st['factorizations']} factorisations, {st['halvings']} step halvings")
     if diverged:
         text += (f"\n  DIVERGED at t={diverged['time_s']:.6g} s: {diverged['cause']} -- "
                  f"{diverged['detail']}")

@@ -32,10 +32,10 @@ from fxflex.beam.elements import ANCF_SLOTS, ancf_tables, gauss
 from fxflex.analysis.linear import DenseStability
 from fxflex.beam.invariants import GramChain, _matvec
 from fxflex.beam.line import beam_line
-from fxflex.beam.linear import newton, omega_max
+from fxflex.beam.linear import DenseLU, newton, omega_max
 from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
 from fxflex.scene import Drive, Scene
-from fxflex.scene.kinematics import P3, S3
+from fxflex.scene.kinematics import P3, S3, rotation_z
 
 __all__ = ["build", "dof_count", "ANCF", "constrained_slots", "QUADRATURE", "elasticity_matrix",
            "reference_coordinates"]
@@ -173,9 +173,10 @@ class ANCF(DenseStability):
         self.root_free = self.free[self.free < SLOTS]
         self.dof = 3 * len(self.free)
         self.free_dofs = (3 * self.free[:, None] + np.arange(3)).ravel()
+        self.con_dofs = (3 * self.con[:, None] + np.arange(3)).ravel()
         self.timings = {"assemble": time.perf_counter() - t0}
         t1 = time.perf_counter()
-        Mff = Ms[np.ix_(self.free, self.free)]
+        self.Mff = Mff = Ms[np.ix_(self.free, self.free)]
         Minv = np.linalg.inv(Mff)
         self.Minv = 0.5 * (Minv + Minv.T)
         self.Mfc = Ms[np.ix_(self.free, self.con)]
@@ -188,6 +189,8 @@ class ANCF(DenseStability):
         self._Ae0c = np.zeros((len(self.con), 3))
         self._mfa = np.zeros((len(self.free), 3))
         self._rhs = np.zeros((len(self.free), 3))
+        self._xf, self._mfx = np.zeros((len(self.free), 3)), np.zeros((len(self.free), 3))
+        self._factor: HubFrameLU | None = None
         self._afree = np.zeros((len(self.free), 3))
         self._col = np.zeros(self.n_slots)
         self._A = np.eye(3)
@@ -244,6 +247,17 @@ class ANCF(DenseStability):
     def acceleration(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
         """out = M^-1 (Q_e - Q_d - Q_k) on the free coordinates (Eq. 57), the exact prescribed
         acceleration (phi'' S - phi'^2 P) A e0 on the root's constrained ones."""
+        rhs = self._free_force(t, q, v)
+        np.matmul(self.Minv, rhs, out=self._afree)
+        out3 = out.reshape(-1, 3)
+        nr = len(self.root_free)
+        out3[self.con] = self._acon
+        out3[self.root_free] = self._afree[:nr]
+        out3[SLOTS:] = self._afree[nr:]
+
+    def _free_force(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """F = Q_e - Q_d - Q_k - M_fc e_c'' on the free slots, (free slots, 3), in the work array
+        ``_rhs``; leaves the prescribed acceleration e_c'' of the constrained slots in ``_acon``."""
         phi, rate, accel = self.drive.state(t)
         A = self._A if self.at_rest else self._rotate(phi)
         u, F, Ku, d = self._u, self._F, self._Ku, self._d
@@ -276,7 +290,7 @@ class ANCF(DenseStability):
             K -= (rate * rate) * P3
             np.take(self._Ae0, self.con, axis=0, out=self._Ae0c, mode="clip")
             np.matmul(self._Ae0c, K.T, out=self._acon)
-        F3, out3 = F.reshape(-1, 3), out.reshape(-1, 3)
+        F3 = F.reshape(-1, 3)
         nr = len(self.root_free)
         rhs = self._rhs
         np.take(F3, self.root_free, axis=0, out=rhs[:nr], mode="clip")
@@ -284,10 +298,46 @@ class ANCF(DenseStability):
         if not self.at_rest:                     # its inertia load on the free coordinates
             np.matmul(self.Mfc, self._acon, out=self._mfa)
             rhs -= self._mfa
-        np.matmul(self.Minv, rhs, out=self._afree)
-        out3[self.con] = self._acon
-        out3[self.root_free] = self._afree[:nr]
-        out3[SLOTS:] = self._afree[nr:]
+        return rhs
+
+    # ------------------------------------------------------------------ implicit integration
+    def force(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """F = Q_e - Q_d - Q_k - M_fc e_c'' on the free coordinates (Eq. 57), 0 on the root's
+        constrained ones."""
+        rhs = self._free_force(t, q, v)
+        out[self.con_dofs] = 0.0               # flat indices: 2-D row indexing allocates
+        out[self.free_dofs] = rhs.reshape(-1)
+
+    def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        """M_ff x_f with M = M_s (x) I_3 (Eq. 54)."""
+        np.take(x, self.free_dofs, out=self._xf.reshape(-1), mode="clip")
+        np.matmul(self.Mff, self._xf, out=self._mfx)
+        out[self.con_dofs] = 0.0
+        out[self.free_dofs] = self._mfx.reshape(-1)
+
+    def factorize(self, t: float, q: np.ndarray, v: np.ndarray, m: float, c: float, k: float
+                  ) -> "HubFrameLU":
+        """S = m M + c C_t + k K_t on the free coordinates, factorised in the hub frame.
+
+        K_t = dQ_k/de + dQ_d/de with the exact tangent of the invariant-tensor force and, for the
+        relative damping (Eq. 56), dQ_d/de = -c/rho phi' M_s (x) S; C_t = c/rho M_s (x) I_3. The
+        elastic energy does not change under a rigid rotation of every slot, so K_t(A e) =
+        A_d K_t(e) A_d^T, and M_s (x) I_3 and M_s (x) S commute with A_d = I (x) A: S(e) = A_d
+        S(A^T e) A_d^T. The factor is made of S(A^T e) and solves rotate by A(phi(t)) at the time
+        asked, so that it stays the tangent while the beam turns."""
+        phi, rate, _ = self.drive.state(t)
+        A = rotation_z(phi)
+        e_hub = (q.reshape(-1, 3) @ A).reshape(-1)
+        K = self.tangent_stiffness(e_hub)
+        if self.c_rho and not self.absolute:
+            K -= self.c_rho * rate * np.kron(self.Ms, S3)
+        K *= k
+        K += (m + c * self.c_rho) * np.kron(self.Ms, np.eye(3))
+        if self._factor is None:
+            self._factor = HubFrameLU(self.free_dofs, self.n_full, self.drive)
+        self._factor.lu.matrix[...] = K[np.ix_(self.free_dofs, self.free_dofs)]
+        self._factor.lu.factor()
+        return self._factor
 
     def tip(self, t: float, q: np.ndarray) -> np.ndarray:
         """U = A^T x_tip - x0_tip: the rigid rotation removed (SPEC section 2)."""
@@ -394,6 +444,30 @@ class ANCF(DenseStability):
             f = np.ix_(self.free_dofs, self.free_dofs)
             self._omega_max = omega_max(self.KL_dense[f], np.kron(self.Ms, np.eye(3))[f])
         return self._omega_max
+
+
+class HubFrameLU:
+    """Dense LU of the iteration matrix in the hub frame, S_hub = A_d^T S A_d on the free
+    coordinates: solve(t, r) = A_d S_hub^-1 A_d^T r with A = A(phi(t)) per 3-vector slot."""
+
+    def __init__(self, free_dofs: np.ndarray, n_full: int, drive: Drive):
+        self.free_dofs, self.drive = free_dofs, drive
+        self.lu = DenseLU(len(free_dofs))
+        self._w = np.zeros(n_full)
+        self._b, self._x = np.zeros(len(free_dofs)), np.zeros(len(free_dofs))
+        self._A = np.eye(3)
+
+    def solve(self, t: float, r: np.ndarray, out: np.ndarray) -> None:
+        phi = self.drive.angle(t)
+        cs, sn = math.cos(phi), math.sin(phi)
+        A, w = self._A, self._w
+        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = cs, -sn, sn, cs
+        np.matmul(r.reshape(-1, 3), A, out=w.reshape(-1, 3))          # A^T r per slot
+        np.take(w, self.free_dofs, out=self._b, mode="clip")
+        self.lu.solve_into(self._b, self._x)
+        w.fill(0.0)
+        w[self.free_dofs] = self._x
+        np.matmul(w.reshape(-1, 3), A.T, out=out.reshape(-1, 3))      # A x per slot
 
 
 def build(scene: Scene, comm, options: BuildOptions | None = None) -> ANCF:

@@ -32,7 +32,7 @@ import numpy as np
 from fxflex.beam.elements import lebb_tables
 from fxflex.beam.line import beam_line
 from fxflex.analysis.linear import DenseStability
-from fxflex.beam.linear import newton, omega_max
+from fxflex.beam.linear import DenseLU, newton, omega_max
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
@@ -138,8 +138,8 @@ class FloatingFrameBeam(DenseStability):
         # root rows, for the section forces the beam transmits to the clamp (root_stress)
         self.K_root, self.fq_root = full["K"][:6].copy(), full["fq"][:6].copy()
         f = slice(6, None)                                   # root node clamped
-        self.M, self.G, self.N = full["M"][f, f], full["G"][f, f], full["N"][f, f]
-        self.K = full["K"][f, f]
+        # contiguous copies: np.dot(view, x, out=) would copy a strided view at every call
+        self.M, self.G, self.N, self.K = (np.ascontiguousarray(full[k][f, f]) for k in "MGNK")
         self.g, self.n, self.fq = full["g"][f], full["n"][f], full["fq"][f]
         self.ftip = np.zeros(self.dof)
         self.ftip[-6:-3] = scene.load.tip_force
@@ -150,6 +150,7 @@ class FloatingFrameBeam(DenseStability):
         self.MiK, self.MiG, self.MiN = self.Minv @ self.K, self.Minv @ self.G, self.Minv @ self.N
         self.Mi_fq, self.Mi_tip = self.Minv @ self.fq, self.Minv @ self.ftip
         self.Mi_load = self.Mi_fq + self.Mi_tip          # both follow the load ramp
+        self.load = self.fq + self.ftip
         self.at_rest = self.drive.at_rest                # no Coriolis, no inertia loads
         self.Mi_g, self.Mi_n = self.Minv @ self.g, self.Minv @ self.n
         n = self.dof
@@ -163,6 +164,10 @@ class FloatingFrameBeam(DenseStability):
         self._memo_t: float | None = None
         self._memo_q, self._memo_v, self._memo_d = np.zeros(n), np.zeros(n), np.zeros(n)
         self._key = None
+        # implicit integration: the same coefficients without M^-1 (built when first asked for)
+        self._Keff, self._Ceff, self._feff = np.zeros((n, n)), np.zeros((n, n)), np.zeros(n)
+        self._fkey = None
+        self._lu: DenseLU | None = None
         self.timings["factorise"] = time.perf_counter() - t1
         self._steady: SteadyState | None = None
         self._omega_max: float | None = None
@@ -208,24 +213,84 @@ class FloatingFrameBeam(DenseStability):
         rate, accel = self.drive.rate(t), self.drive.accel(t)
         if self._key != (rate, accel):
             self._coefficients(rate, accel)
+        rest = self.at_rest
+        self._combine(t, q, v, out, self._Kq, None if rest else self._Cv,
+                      None if rest else self._f, self.Mi_load, self.Minv)
+
+    def _combine(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray, K, C, f, load,
+                 Minv) -> None:
+        """out = -K W - C W' + f + r(t) load - [Minv] Q_N(W): the right-hand side with the
+        matrices of ``acceleration`` (M^-1 applied) or of ``force`` (Minv None). C None stands
+        for c/rho I (M^-1 D at rest), f None for no inertia loads (at rest)."""
         w1 = self._w1
-        np.dot(self._Kq, q, out=out)
-        if self.at_rest:                                   # M^-1 (2 phi' G + D) = c/rho I
+        np.dot(K, q, out=out)
+        if C is None:                                      # at rest: M^-1 (2 phi' G + D) = c/rho I
             np.multiply(v, self.c_rho, out=w1)
         else:
-            np.dot(self._Cv, v, out=w1)
+            np.dot(C, v, out=w1)
         out += w1
         np.negative(out, out=out)
-        if not self.at_rest:                               # - phi'' g + phi'^2 n
-            out += self._f
-        np.multiply(self.Mi_load, self.scene.load.factor(t), out=w1)
+        if f is not None:                                  # - phi'' g + phi'^2 n
+            out += f
+        np.multiply(load, self.scene.load.factor(t), out=w1)
         out += w1
         if self.nonlinear:
             self._Wfull[6:] = q
             self._QN.fill(0.0)
             self.add_nonlinear_force(self._Wfull, self._QN)
-            np.dot(self.Minv, self._QN[6:], out=w1)
-            out -= w1
+            if Minv is None:
+                out -= self._QN[6:]
+            else:
+                np.dot(Minv, self._QN[6:], out=w1)
+                out -= w1
+
+    # ------------------------------------------------------------------ implicit integration
+    def _force_coefficients(self, rate: float, accel: float) -> None:
+        """K_eff = K_L + phi'' G - phi'^2 N [+ c/rho phi' G], C_eff = 2 phi' G + D and
+        f = -phi'' g + phi'^2 n: ``_coefficients`` without M^-1."""
+        Keff, Ceff = self._Keff, self._Ceff
+        np.multiply(self.G, accel + (self.c_rho * rate if self.absolute else 0.0), out=Keff)
+        Keff += self.K
+        np.multiply(self.N, rate * rate, out=self._nn)
+        Keff -= self._nn
+        np.multiply(self.G, 2.0 * rate, out=Ceff)
+        np.multiply(self.M, self.c_rho, out=self._nn)
+        Ceff += self._nn
+        np.multiply(self.g, -accel, out=self._feff)
+        np.multiply(self.n, rate * rate, out=self._w2)
+        self._feff += self._w2
+        self._fkey = (rate, accel)
+
+    def force(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """F = Q_e - C_eff W' - K_eff W - Q_N(W) + f (Eq. 44/58, the right-hand side of
+        ``acceleration`` before M^-1)."""
+        rate, accel = self.drive.rate(t), self.drive.accel(t)
+        if self._fkey != (rate, accel):
+            self._force_coefficients(rate, accel)
+        self._combine(t, q, v, out, self._Keff, self._Ceff, None if self.at_rest else self._feff,
+                      self.load, None)
+
+    def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        np.dot(self.M, x, out=out)
+
+    def factorize(self, t: float, q: np.ndarray, v: np.ndarray, m: float, c: float, k: float
+                  ) -> DenseLU:
+        """S = m M + c C_eff + k (K_eff + K_N,T(W)): exact tangents (K_N,T from the invariant
+        tensors, :meth:`~fxflex.beam.invariants.GramChain.tangent`)."""
+        rate, accel = self.drive.rate(t), self.drive.accel(t)
+        if self._fkey != (rate, accel):
+            self._force_coefficients(rate, accel)
+        if self._lu is None:
+            self._lu = DenseLU(self.dof)
+        S = self._lu.matrix
+        S[...] = self._Keff
+        if self.nonlinear:
+            self._Wfull[6:] = q
+            S += self.nonlinear_tangent(self._Wfull)[6:, 6:]
+        S *= k
+        S += c * self._Ceff
+        S += m * self.M
+        return self._lu.factor()
 
     def _same(self, a: np.ndarray, b: np.ndarray) -> bool:
         np.subtract(a, b, out=self._memo_d)

@@ -1,5 +1,6 @@
-"""Small dense linear algebra shared by the beam formulations: Newton steady states and the
-highest circular frequency (the eigenvalues of the linearised rotating system are in
+"""Small dense linear algebra shared by the beam formulations (and the reduced solid models):
+Newton steady states, the highest circular frequency, and the LU factor handle of implicit
+integration (the eigenvalues of the linearised rotating system are in
 :mod:`fxflex.analysis.linear`).
 
 The beam models have at most a few thousand unknowns, so dense LAPACK is simple and fast.
@@ -10,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as la
 
-__all__ = ["newton", "omega_max"]
+__all__ = ["newton", "omega_max", "DenseLU"]
 
 
 def newton(residual, tangent, x0: np.ndarray, *, rtol: float = 1e-10, maxit: int = 30,
@@ -53,3 +54,33 @@ def omega_max(K: np.ndarray, M: np.ndarray) -> float:
     n = K.shape[0]
     lam = la.eigh(K, M, eigvals_only=True, subset_by_index=[n - 1, n - 1])
     return float(np.sqrt(max(lam[0], 0.0)))
+
+
+class DenseLU:
+    """LU factor of a dense n x n matrix kept in one Fortran-ordered array (LAPACK getrf, in
+    place), solved with getrs: the :class:`~fxflex.formulation.TangentFactor` of the small models.
+    ``matrix`` is the array to fill before ``factor``; ``solve`` allocates no arrays."""
+
+    def __init__(self, n: int):
+        self.matrix = np.zeros((n, n), order="F")
+        self.piv = np.zeros(n, dtype=np.int32)
+        self._b = np.zeros(n)
+
+    def factor(self) -> "DenseLU":
+        lu, piv, info = la.lapack.dgetrf(self.matrix, overwrite_a=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"iteration matrix is singular (getrf info {info})")
+        if lu is not self.matrix:
+            self.matrix[...] = lu
+        self.piv[:] = piv
+        return self
+
+    def solve_into(self, r: np.ndarray, out: np.ndarray) -> None:
+        """out = S^-1 r (r and out may be strided views, lengths n)."""
+        b = self._b
+        b[:] = r
+        x, info = la.lapack.dgetrs(self.matrix, self.piv, b, overwrite_b=1)
+        out[:] = x
+
+    def solve(self, t: float, r: np.ndarray, out: np.ndarray) -> None:
+        self.solve_into(r, out)

@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fxflex.errors import FxflexError
+from fxflex.beam.linear import DenseLU
 from fxflex.formulation import BuildOptions
 from fxflex.scene import Scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
@@ -216,6 +217,7 @@ class GCMS(ReducedFormulation):
             self._setup_operators(kmats, [-self.c_rho * np.eye(self.dof)],
                                   [gm.QP, gm.QS, gm.Q3, gm.wS, gm.wP])
         self._dK = AffineStack([self.Kc1, self.Ks1, self.Kc2, self.Ks2])
+        self._rotated: RotatedLU | None = None
         self.timings["build"] = time.perf_counter() - t0
 
     def stiffness(self, phi: float) -> np.ndarray:
@@ -242,6 +244,28 @@ class GCMS(ReducedFormulation):
         fw[0], fw[1], fw[2] = r * c, r * s, r
         fw[3] = -a * c + w * w * s
         fw[4] = a * s + w * w * c
+
+    def factorize(self, t: float, q: np.ndarray, v: np.ndarray, m: float, c: float, k: float
+                  ) -> "RotatedLU":
+        """S = m I + c C_t + k K_t, factorised once for every hub angle.
+
+        C_t = (c/rho) I and K_t = K(phi) [- (c/rho) phi' J for the relative damping]; since
+        K(phi) = R(phi) K(0) R(phi)^T (A_d Psi~ = Psi~ R, module docstring) and J commutes with
+        R, S(phi) = R(phi) S(0) R(phi)^T. A factor of S(0) therefore solves at any angle by
+        rotating with R(phi(t)) (to the Gram cut's round-off, 4e-10 on a coarse mesh), where a
+        factor of S(phi) itself would go stale within a step: the rotation mixes stiff and soft
+        global modes."""
+        _, rate, _ = self.drive.state(t)
+        if self._rotated is None:
+            self._rotated = RotatedLU(self)
+        S = self._rotated.lu.matrix
+        S[...] = self.stiffness(0.0)
+        if not self.absolute and self.c_rho:
+            S -= (self.c_rho * rate) * self.gm.J
+        S *= k
+        S.flat[::self.dof + 1] += m + c * self.c_rho
+        self._rotated.lu.factor()
+        return self._rotated
 
     def tip(self, t: float, q: np.ndarray) -> np.ndarray:
         """U_tip = A^T u_f,tip: the rigid rotation removed (SPEC section 2)."""
@@ -287,6 +311,29 @@ class GCMS(ReducedFormulation):
     def strain_energy(self, t: float, q: np.ndarray) -> float:
         """V_e = xi^T K(phi) xi / 2 (Eq. 21)."""
         return float(0.5 * q @ self.stiffness(self.drive.angle(t)) @ q)
+
+
+class RotatedLU:
+    """LU of S(0) solving S(phi) x = r as x = R S(0)^-1 R^T r with R = R(phi(t))
+    (:meth:`GCMS.factorize`)."""
+
+    def __init__(self, gcms: GCMS):
+        n = gcms.dof
+        self.gm, self.drive = gcms.gm, gcms.drive
+        self.lu = DenseLU(n)
+        self._R, self._W = np.zeros((n, n)), np.zeros((n, n))
+        self._b, self._x = np.zeros(n), np.zeros(n)
+
+    def solve(self, t: float, r: np.ndarray, out: np.ndarray) -> None:
+        c, s, _, _ = rotation_weights(self.drive.angle(t))
+        R, W, gm = self._R, self._W, self.gm
+        np.multiply(gm.MP, c, out=R)
+        np.multiply(gm.J, s, out=W)
+        R += W
+        R += gm.MG3
+        np.dot(R.T, r, out=self._b)
+        self.lu.solve_into(self._b, self._x)
+        np.dot(R, self._x, out=out)
 
 
 def build(scene: Scene, comm, options: BuildOptions) -> GCMS:

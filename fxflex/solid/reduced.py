@@ -50,6 +50,7 @@ from mpi4py import MPI
 
 from fxflex import cache
 from fxflex.analysis.linear import DenseStability
+from fxflex.beam.linear import DenseLU
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
 
@@ -225,6 +226,7 @@ class ReducedFormulation(DenseStability):
         self.constant_speed = scene.rotation.profile == "constant" or self.drive.at_rest
         self.timings: dict[str, float] = {}
         self._root_map: np.ndarray | None = None
+        self._lu: DenseLU | None = None
 
     # -- Formulation interface ---------------------------------------------------------------
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -252,6 +254,32 @@ class ReducedFormulation(DenseStability):
 
     def extras(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[float]:
         return (self.drive_torque(t, q, v),)
+
+    # -- implicit integration (formulation.Implicit) ----------------------------------------------
+    def force(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """F = q'' itself: the modal mass is the identity and nothing is constrained."""
+        self.acceleration(t, q, v, out)
+
+    def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        out[:] = x
+
+    def factorize(self, t: float, q: np.ndarray, v: np.ndarray, m: float, c: float, k: float
+                  ) -> DenseLU:
+        """S = m I + c C_t + k K_t with the exact tangents of the linear reduced equations,
+        K_t = -sum_i w_i(t) K_i and C_t = -sum_i w_i(t) C_i (the weighted blocks of
+        ``acceleration``; GCMS's stiffness turns with phi, FFRF's only changes with the speed)."""
+        self._weights(t)
+        if self._lu is None:
+            self._lu = DenseLU(self.dof)
+            self._S = np.zeros((self.dof, self.dof))
+        S, n, out = self._S, self.dof, self._lu.matrix
+        np.dot(self.kstack.w, self.kstack.A.reshape(self.kstack.k, n * n), out=S.reshape(-1))
+        np.multiply(S, -k, out=out)
+        np.dot(self.cstack.w, self.cstack.A.reshape(self.cstack.k, n * n), out=S.reshape(-1))
+        S *= c
+        out -= S
+        out.flat[::n + 1] += m
+        return self._lu.factor()
 
     # -- rotating frame: steady state, linearisation, eigenvalues --------------------------------
     @property

@@ -190,6 +190,7 @@ class TLF:
         self.hub_frame = hub_frame and not self.drive.at_rest
         self.timings = dict(self.model.timings)
         self._dyn: _Dynamics | None = None
+        self._tangent: HubTangent | None = None
         self._omega_max: float | None = None
         self._root: tuple | None = None
         self._steady: SteadyState | None = None
@@ -224,9 +225,10 @@ class TLF:
         q[d.root] = d.root_combination(c - 1.0, s)
         v[d.root] = d.root_combination(-dphi * s, dphi * c)
 
-    def acceleration(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
-        """out = M^-1 (Q_e - Q_k(u) - Q_d) on free nodes (Eq. 35); on root nodes the prescribed
-        u_r'' = (phi'' S - phi'^2 P) A x0 = alpha P x0 + beta S x0."""
+    def _loads(self, t: float, q: np.ndarray) -> tuple[float, float, float, float, float]:
+        """d.rhs = Q_e - Q_k(u) [- M_fr u_r'' with the consistent mass] on the free rows (root
+        rows hold the reactions); returns (alpha, beta, phi', cos phi, sin phi) with
+        u_r'' = alpha P x0 + beta S x0."""
         d = self.dynamics
         phi, dphi, ddphi = self.drive.state(t)
         c, s = math.cos(phi), math.sin(phi)
@@ -241,11 +243,20 @@ class TLF:
                 _axpy(lam * d.tip_now[j], d.f_tip[j], rhs)
         alpha = -ddphi * s - dphi * dphi * c
         beta = ddphi * c - dphi * dphi * s
+        if d.mass != "lumped":
+            _axpy(-alpha, d.lift_P, rhs)        # - M_fr u_r''
+            _axpy(-beta, d.lift_S, rhs)
+        return alpha, beta, dphi, c, s
+
+    def acceleration(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """out = M^-1 (Q_e - Q_k(u) - Q_d) on free nodes (Eq. 35); on root nodes the prescribed
+        u_r'' = (phi'' S - phi'^2 P) A x0 = alpha P x0 + beta S x0."""
+        d = self.dynamics
+        alpha, beta, dphi, c, s = self._loads(t, q)
+        rhs = d.rhs
         if d.mass == "lumped":
             np.multiply(rhs, d.m_inv, out=out)
         else:
-            _axpy(-alpha, d.lift_P, rhs)        # - M_fr u_r''
-            _axpy(-beta, d.lift_S, rhs)
             rhs[d.root] = d.root_combination(alpha, beta)
             for j, (rhs_j, b_arr, x_arr) in enumerate(d.components):
                 b_arr[:] = rhs_j
@@ -258,6 +269,42 @@ class TLF:
                 d.damped_rate(dphi, c, s, q, v)
                 _axpy(-d.c_rho, d.y, out)
         out[d.root] = d.root_combination(alpha, beta)
+
+    # -- implicit integration (formulation.Implicit) ----------------------------------------------
+    def force(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """F = Q_e - Q_k(u) - Q_d - M_fr u_r'' on the free rows (Eq. 35), 0 on the root. Q_d =
+        (c/rho) M y with the damped rate y of ``damped_rate``, which is zero on the root nodes
+        (they move rigidly), so M y = M_ff y_f."""
+        d = self.dynamics
+        _, _, dphi, c, s = self._loads(t, q)
+        out[:] = d.rhs
+        if d.c_rho > 0.0:
+            d.damped_rate(dphi, c, s, q, v)
+            self.mass_apply(d.y, d.my)
+            _axpy(-d.c_rho, d.my, out)
+        out[d.root] = 0.0
+
+    def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        """M_ff x_f: lumped row sums, or the consistent mass per component (M = M_s (x) I_3)."""
+        d = self.dynamics
+        if d.mass == "lumped":
+            np.multiply(x, d.m, out=out)
+        else:
+            for j, (_, b_arr, x_arr) in enumerate(d.components):
+                b_arr[:] = x[j::3]
+                b_arr[d.root_nodes] = 0.0              # the scalar mass is 1 on root rows
+                d.M.mult(d.b, d.x)
+                out[j::3] = x_arr
+        out[d.root] = 0.0
+
+    def factorize(self, t: float, q: np.ndarray, v: np.ndarray, m: float, c: float, k: float
+                  ) -> "HubTangent":
+        """S = m M + c C_t + k K_t factorised in the hub frame (MUMPS LDL^T, see
+        :class:`HubTangent`); built (forms compiled, matrix allocated) on the first call."""
+        if self._tangent is None:
+            self._tangent = HubTangent(self)
+        self._tangent.factorize(t, q, m, c, k)
+        return self._tangent
 
     def tip(self, t: float, q: np.ndarray) -> np.ndarray:
         """Free-end deflection in O-XYZ, U = A^T (x0 + u) - x0 of the tip centre (SPEC 2)."""
@@ -391,6 +438,82 @@ class TLF:
         return f
 
 
+class HubTangent:
+    """The iteration matrix of implicit integration, S = m M + c C_t + k K_t, held in the hub frame.
+
+    K_t = dQ_k/du + dQ_d/du and C_t = dQ_d/du' = D = (c/rho) M. The SVK force is objective,
+    Q_k(u) = A_d Q_k(U) with U = A_d^T (x0 + u) - x0, so dQ_k/du = A_d K_T(U) A_d^T with K_T the
+    ``ufl.derivative`` of the residual (Eq. 33) at U; M (lumped or M_s (x) I_3) commutes with
+    A_d. Hence S(t) = A_d(phi(t)) S_hub A_d(phi(t))^T, S_hub = m M + c D + k K_T(U), and one
+    factor of S_hub stays the tangent while the beam turns: ``solve`` rotates r into the hub
+    frame, solves and rotates back. Left out of S_hub: the relative damping's dQ_d/du =
+    -(c/rho) phi' M S_d (skew), k c/rho phi' relative to m: 1e-9 at 1000 rpm and dt = 10 us,
+    which keeps S symmetric (MUMPS LDL^T) at no cost to Newton's convergence. Root rows and
+    columns are the identity (the prescribed coordinates drop out).
+    """
+
+    def __init__(self, tlf: TLF):
+        from dolfinx.fem.petsc import create_matrix
+
+        model, d = tlf.model, tlf.dynamics
+        self.tlf, self.d, self.drive = tlf, d, tlf.drive
+        t0 = time.perf_counter()
+        self.U = fem.Function(model.V)
+        self.kc = fem.Constant(model.mesh, 0.0)
+        self.mc = fem.Constant(model.mesh, 0.0)
+        R = forms.svk_residual(tlf.scene.material, self.U, model.u_test, model.dx)
+        a = self.kc * ufl.derivative(R, self.U, model.u_trial)
+        if d.mass != "lumped":
+            a = a + self.mc * model.mass_form()
+        self.form = fem.form(a)
+        self.A = create_matrix(self.form)
+        self.ksp = direct_solver(self.A)
+        self.b, self.x = self.A.createVecs()
+        self.b_arr, self.x_arr = self.b.getArray(), self.x.getArray()
+        if d.mass == "lumped":
+            self.diag = self.A.createVecLeft()
+            self.m_free = d.m.copy()
+            self.m_free[d.root] = 0.0
+        self.bcs = [model.bc]
+        self.Ul = self.U.x.array
+        self.rot = np.eye(3)
+        tlf.timings["tangent_build"] = time.perf_counter() - t0
+
+    def factorize(self, t: float, q: np.ndarray, m: float, c: float, k: float) -> None:
+        from dolfinx.fem.petsc import assemble_matrix
+
+        d = self.d
+        phi = self.drive.angle(t)
+        d.set_angle(math.cos(phi), math.sin(phi))
+        n = d.n
+        d.ul[:n] = q
+        d.u_fn.x.scatter_forward()
+        np.add(d.x0l, d.ul, out=d.work)              # U = A^T (x0 + u) - x0, as rows x^T A
+        np.matmul(d.work.reshape(-1, 3), d.A, out=self.Ul.reshape(-1, 3))
+        self.Ul -= d.x0l
+        mass = m + c * d.c_rho
+        self.kc.value = k
+        self.mc.value = mass
+        self.A.zeroEntries()
+        assemble_matrix(self.A, self.form, bcs=self.bcs, diagonal=1.0)
+        self.A.assemble()
+        if d.mass == "lumped":
+            arr = self.diag.getArray()
+            np.multiply(self.m_free, mass, out=arr)
+            self.A.setDiagonal(self.diag, addv=PETSc.InsertMode.ADD_VALUES)
+        self.ksp.getPC().setUp()                 # the numerical factorisation, now (KSPSetUp
+        #                                          would leave it to the next solve)
+
+    def solve(self, t: float, r: np.ndarray, out: np.ndarray) -> None:
+        phi = self.drive.angle(t)
+        cs, sn = math.cos(phi), math.sin(phi)
+        A = self.rot
+        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = cs, -sn, sn, cs
+        np.matmul(r.reshape(-1, 3), A, out=self.b_arr.reshape(-1, 3))     # A^T r per node
+        self.ksp.solve(self.b, self.x)
+        np.matmul(self.x_arr.reshape(-1, 3), A.T, out=out.reshape(-1, 3))  # A x per node
+
+
 class FieldWriter:
     """Writes u (o-xyz) and the hub-frame displacement U = A^T (x0 + u) - x0 at each call, to
     one XDMF/HDF5 pair. Every rank must call ``write`` and ``close``."""
@@ -452,8 +575,8 @@ class _Dynamics:
         t1 = time.perf_counter()
         self.mass = tlf.mass_kind
         if self.mass == "lumped":
-            m = _owned(model.vector(model.lumped_mass_form(), zero_clamped=False), n)
-            self.m_inv = 1.0 / m
+            self.m = _owned(model.vector(model.lumped_mass_form(), zero_clamped=False), n)
+            self.m_inv = 1.0 / self.m
         else:
             Mf = model.compile(model.mass_form())
             M_full = model.matrix(Mf, bcs=[])
@@ -475,7 +598,8 @@ class _Dynamics:
         self.relative = scene.damping.model == "relative"
         # step buffers
         self.A = np.eye(3)
-        self.y = np.empty(n)
+        self.y, self.my = np.empty(n), np.empty(n)
+        self.root_nodes = model.root_owned
 
     def _lifting(self, M_full: PETSc.Mat, root_values: np.ndarray) -> np.ndarray:
         r, y = M_full.createVecs()

@@ -2,9 +2,10 @@
 
 A divergence is *physical* when the linearised rotating system has an eigenvalue with positive
 real part (SPEC section 6); otherwise it is *numerical*: for CD the step exceeds 2 / w_max, for
-AB2 the undamped modes grow like exp(w^4 h^3 t / 4) (NOTES.md). Formulations that can answer
-offer ``growth_rate()`` -> (Re lambda_max, |Im lambda| of that root) and ``omega_max()`` -> the
-highest circular frequency of the discrete system.
+AB2 the undamped modes grow like exp(w^4 h^3 t / 4) (NOTES.md); generalised-alpha has no step
+limit on linear systems and fails only through Newton's method (``NewtonFailure``). Formulations
+that can answer offer ``growth_rate()`` -> (Re lambda_max, |Im lambda| of that root) and
+``omega_max()`` -> the highest circular frequency of the discrete system.
 """
 
 from __future__ import annotations
@@ -57,6 +58,9 @@ def diagnose(form, integrator: str, dt: float, result) -> dict:
         expo = ab2_growth_exponent(wmax, dt, out["time_s"])
         out["detail"] += (f"; AB2 amplifies the highest mode (w_max = {wmax:.4g} rad/s) by "
                           f"exp(w^4 h^3 t / 4) = exp({expo:.3g}) by this time; reduce dt")
+    elif integrator == "generalized-alpha":
+        out["detail"] += ("; generalized-alpha is unconditionally stable on linear systems, so "
+                          "the step only limits Newton's convergence: reduce dt")
     elif growth is None:
         out["cause"] = "numerical"
         out["detail"] += "; no unstable eigenvalue check available for this method"

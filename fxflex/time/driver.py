@@ -2,7 +2,8 @@
 
 The loop samples the free-end deflection (and any extra outputs the formulation offers, e.g. the
 drive torque), hands each sample to a callback (the CSV writer), shows progress and stops early
-when the response diverges: a non-finite value or a deflection beyond ``limit``.
+when the response diverges: a non-finite value or a deflection beyond ``limit``, or an implicit
+step whose Newton iteration fails for good (:class:`~fxflex.time.implicit.NewtonFailure`).
 """
 
 from __future__ import annotations
@@ -13,7 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fxflex.time.explicit import make_scheme
+from fxflex.time.implicit import NewtonFailure
+from fxflex.time.schemes import make_scheme
 
 __all__ = ["RunResult", "simulate", "divergence_limit"]
 
@@ -27,6 +29,7 @@ class RunResult:
     wall_s: float                    # wall time of the loop
     samples: int = 0
     history: list = field(default_factory=list)   # (t, tip...) rows when keep_history
+    stats: dict = field(default_factory=dict)     # the scheme's counters (implicit: Newton)
 
 
 def divergence_limit(form) -> float:
@@ -38,13 +41,16 @@ def divergence_limit(form) -> float:
 def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: int = 1,
              on_sample=None, progress=None, limit: float | None = None, keep_history=False,
              t0: float = 0.0, state: tuple[np.ndarray, np.ndarray] | None = None,
-             extras: bool = True) -> RunResult:
+             extras: bool = True, rho_inf: float | None = None,
+             scheme_options: dict | None = None) -> RunResult:
     """Integrate ``form`` from t0 to t_end with step dt.
 
     on_sample(t, tip, extras, q) is called at step 0, every ``sample_every`` steps and at the end
     (q is the live state array: copy it to keep it). The formulation's extra outputs (e.g. the
     drive torque, which costs an acceleration evaluation) are computed only when someone reads
     them: ``extras`` is true and there is an ``on_sample`` or a history; else the callback gets ().
+    ``rho_inf`` and ``scheme_options`` (tol, max_iter, max_halvings) configure
+    ``generalized-alpha``.
     """
     if dt <= 0 or not math.isfinite(dt):
         raise ValueError("dt must be positive")
@@ -55,8 +61,8 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
     extras = getattr(form, "extras", None) if wanted else None
     history = []
 
-    def sample(k: int) -> np.ndarray:
-        t = t0 + k * dt
+    def sample(k: int, t: float | None = None) -> np.ndarray:
+        t = t0 + k * dt if t is None else t
         tip = form.tip(t, q)
         ex = extras(t, q, v) if extras is not None else ()
         if keep_history:
@@ -66,13 +72,19 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
         return tip
 
     check_every = max(1, min(sample_every, 100))
-    scheme = make_scheme(integrator)
+    options = dict(scheme_options or {})
+    if rho_inf is not None:
+        options["rho_inf"] = rho_inf
+    scheme = make_scheme(integrator, **options)
     wall0 = time.perf_counter()
     diverged = None
     tip = sample(0)
     nsamples = 1
-    scheme.start(form, t0, dt, q, v)
     k = 1
+    try:
+        scheme.start(form, t0, dt, q, v)
+    except NewtonFailure as exc:
+        return _failed(exc, form, sample, scheme, 0, wall0, nsamples, history)
     while True:
         last = k == nsteps
         sample_now = last or k % sample_every == 0
@@ -94,8 +106,23 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
                 progress.update(k, f"t={t0 + k * dt:.4g} s")
         if last:
             break
-        scheme.step(form, t0 + k * dt, dt, q, v)
+        try:
+            scheme.step(form, t0 + k * dt, dt, q, v)
+        except NewtonFailure as exc:
+            return _failed(exc, form, sample, scheme, k, wall0, nsamples, history)
         k += 1
     wall = time.perf_counter() - wall0
     return RunResult(t=t0 + k * dt, steps=k, tip=np.asarray(tip, dtype=float), diverged=diverged,
-                     wall_s=wall, samples=nsamples, history=history)
+                     wall_s=wall, samples=nsamples, history=history,
+                     stats=dict(getattr(scheme, "stats", {})))
+
+
+def _failed(exc: NewtonFailure, form, sample, scheme, steps: int, wall0: float, nsamples: int,
+            history: list) -> RunResult:
+    """The run stops where an implicit step failed for good: the last converged state is sampled
+    (its time may lie between output times when the step had been cut)."""
+    tip = sample(steps, exc.reached_s)
+    return RunResult(t=exc.reached_s, steps=steps, tip=np.asarray(tip, dtype=float),
+                     diverged={"time_s": exc.time_s, "reason": str(exc)},
+                     wall_s=time.perf_counter() - wall0, samples=nsamples + 1, history=history,
+                     stats=dict(getattr(scheme, "stats", {})))

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["AB2", "CentralDifference", "SCHEMES", "make_scheme"]
+__all__ = ["AB2", "CentralDifference", "SCHEMES"]
 
 
 class AB2:
@@ -104,7 +104,3 @@ def _axpy(y: np.ndarray, alpha: float, x: np.ndarray, out: np.ndarray) -> None:
 
 
 SCHEMES = {"ab2": AB2, "cd": CentralDifference}
-
-
-def make_scheme(name: str):
-    return SCHEMES[name]()

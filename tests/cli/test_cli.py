@@ -7,6 +7,8 @@ import sys
 
 import pytest
 
+from fxflex.cli import main
+
 FXFLEX = [sys.executable, "-m", "fxflex"]
 
 
@@ -29,6 +31,10 @@ def run(*args, cwd=None):
     (["run", "--method", "tlf", "--out", "/nonexistent/dir/x.csv"], "--out"),
     (["bench", "nosuch"], "nosuch"),
     (["compare", "--methods", "ffrf,fem"], "fem"),
+    (["run", "--method", "lebb", "--integrator", "generalized-alpha", "--rho-inf", "1.5"],
+     "--rho-inf"),
+    (["run", "--method", "ancf", "--rho-inf", "0.5"], "--rho-inf"),
+    (["run", "--method", "ancf", "--integrator", "implicit"], "--integrator"),
 ])
 def test_bad_input_is_one_line_and_exit_2(args, words, tmp_path):
     r = run(*args, cwd=tmp_path)
@@ -60,3 +66,31 @@ def test_python_m_and_entry_point_agree():
     a = subprocess.run([exe, "info", "--json"], capture_output=True, text=True)
     b = run("info", "--json")
     assert json.loads(a.stdout)["scene_hash"] == json.loads(b.stdout)["scene_hash"]
+
+
+def test_generalized_alpha_run_writes_csv_and_newton_counters(tmp_path, capsys):
+    """The default step at 2000 rpm (20 us (1000/2000)^1.5 = 7.07 us) shortened to end exactly
+    at --t-end; rho_inf and the Newton counters in the JSON, the CSV as for explicit runs."""
+    out = tmp_path / "series.csv"
+    assert main(["run", "--method", "lebb", "--integrator", "generalized-alpha", "--rpm", "2000",
+                 "--t-end", "1e-3", "--out", str(out), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["integrator"] == "generalized-alpha" and d["rho_inf"] == 0.9
+    assert d["steps"] == 142 and d["dt_s"] == pytest.approx(1e-3 / 142)
+    assert d["t_s"] == pytest.approx(1e-3) and d["diverged"] is None
+    assert d["newton"]["factorizations"] == 1 and d["newton"]["steps"] == 142
+    lines = out.read_text().splitlines()
+    meta = json.loads(" ".join(ln[2:] for ln in lines if ln.startswith("#")))
+    assert meta["rho_inf"] == 0.9 and meta["integrator"] == "generalized-alpha"
+    rows = [ln.split(",") for ln in lines if not ln.startswith("#")]
+    assert rows[0][:4] == ["t_s", "longitudinal_m", "orthogonal_m", "load_m"]
+    assert float(rows[-1][0]) == pytest.approx(1e-3) and len(rows) == 1 + 143
+
+
+def test_generalized_alpha_reports_a_physical_divergence(capsys):
+    assert main(["run", "--method", "lebb", "--integrator", "generalized-alpha", "--rho-inf",
+                 "0.5", "--rpm", "10000", "--t-end", "0.01", "--json",
+                 "--set", "mesh.beam_elements=4"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["diverged"] is not None and d["diverged"]["cause"] == "physical"
+    assert d["rho_inf"] == 0.5 and d["t_s"] < 0.01
