@@ -154,8 +154,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", default="out/compare",
                    help="output folder (default out/compare)")
     p.add_argument("--full", action="store_true",
-                   help="the paper's windows for every method, TLF included (prints its time "
-                        "estimate first; tens of minutes)")
+                   help="the paper's windows for every method, TLF included (about 50 min; "
+                        "the time estimate is printed after the equilibria, before the runs)")
     _common(p)
 
     p = sub.add_parser("cache", help="what fxflex keeps on disk between runs (meshes, eigenmodes, "
