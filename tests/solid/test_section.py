@@ -25,8 +25,7 @@ Q, B, H, L = -800.0, 0.12, 0.06, 1.0
 def _stress(method, scene):
     form = build(method, scene, COMM)
     st = form.steady_state()
-    # at rest TLF's Newton stalls on the round-off floor (3e-7 N) just above its 1e-10 target
-    assert st.converged or st.residuals[-1] < 1e-8 * st.residuals[0]
+    assert st.converged
     return form.root_stress(steady_time(scene), st.q), form
 
 
