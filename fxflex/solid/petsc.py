@@ -40,6 +40,10 @@ class NewtonResult:
         self.timings = {"assemble": 0.0, "factor_solve": 0.0}
 
 
+#: relative size of a Newton correction below which the iterate is converged to round-off
+STEP_TOL = 1e-12
+
+
 def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = None,
            rtol: float = 1e-10, max_it: int = 30, reference: float | None = None,
            symmetric: bool = True) -> NewtonResult:
@@ -48,7 +52,9 @@ def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = 
 
     ``u`` must satisfy the (homogeneous) Dirichlet conditions on entry; ``rhs`` is a constant
     vector (nodal loads that are not a form). Converged when the residual norm falls below
-    ``rtol`` times ``reference`` (default: the first residual norm).
+    ``rtol`` times ``reference`` (default: the first residual norm), or when the last correction
+    was below ``STEP_TOL`` of the solution: with a small load the residual's round-off floor (the
+    internal force terms cancel) can lie above ``rtol`` times the load, while the iterate is exact.
     """
     from dolfinx.fem.petsc import (assemble_matrix, assemble_vector, create_matrix,
                                    create_vector, set_bc)
@@ -72,7 +78,8 @@ def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = 
         out.residuals.append(norm)
         if reference is None:
             reference = norm if norm > 0 else 1.0
-        if norm <= rtol * reference or not np.isfinite(norm):
+        stalled = bool(out.corrections) and out.corrections[-1] <= STEP_TOL * u.vector.norm()
+        if norm <= rtol * reference or stalled or not np.isfinite(norm):
             out.converged = bool(np.isfinite(norm))
             break
         if it == max_it:

@@ -48,6 +48,7 @@ def run(*args, cwd=None):
      "--checkpoint-every"),
     (["run", "--method", "lebb", "--resume", "nosuch.ckpt"], "file not found"),
     (["run", "--method", "tlf", "--resume", "x.ckpt", "--fields", "u.xdmf"], "--fields"),
+    (["compare", "--methods", "ffrf,fem"], "fem"),
     (["run", "--method", "lebb", "--integrator", "generalized-alpha", "--rho-inf", "1.5"],
      "--rho-inf"),
     (["run", "--method", "ancf", "--rho-inf", "0.5"], "--rho-inf"),
