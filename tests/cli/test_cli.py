@@ -30,6 +30,7 @@ def run(*args, cwd=None):
     (["run", "--method", "nebb", "--mass", "lumped"], "--mass"),
     (["run", "--method", "tlf", "--out", "/nonexistent/dir/x.csv"], "--out"),
     (["bench", "nosuch"], "nosuch"),
+    (["bench", "steady", "--reference"], "--reference"),
     (["run", "--method", "lebb", "--integrator", "generalized-alpha", "--rho-inf", "1.5"],
      "--rho-inf"),
     (["run", "--method", "ancf", "--rho-inf", "0.5"], "--rho-inf"),
