@@ -153,6 +153,9 @@ def make_parser() -> argparse.ArgumentParser:
                    help="comma-separated subset of " + ",".join(METHODS))
     p.add_argument("--out", metavar="DIR", default="out/compare",
                    help="output folder (default out/compare)")
+    p.add_argument("--full", action="store_true",
+                   help="the paper's windows for every method, TLF included (about 50 min; "
+                        "the time estimate is printed after the equilibria, before the runs)")
     _common(p)
 
     p = sub.add_parser("cache", help="what fxflex keeps on disk between runs (meshes, eigenmodes, "
@@ -408,18 +411,18 @@ def cmd_compare(args, comm) -> None:
 
     scene = _scene_from_args(args)
     out_dir = os.path.abspath(args.out)
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise FxflexError(f"--out: {out_dir} exists and is not a directory")
     if comm.rank == 0:
-        sys.stderr.write(f"fxflex compare: {', '.join(args.methods)} at 1000, 5000, 10000 rpm;"
-                         f" results into {out_dir}\n")
+        sys.stderr.write(f"fxflex compare: {', '.join(args.methods)}"
+                         f"{' (--full)' if args.full else ''}; results into {out_dir}\n")
 
-    def progress(row):
+    def progress(text):
         if comm.rank == 0:
-            t = 1e3 * row.tip_m
-            sys.stderr.write(f"  {row.method:5s} {row.rpm:6g} rpm  {t[0]:+.5f} {t[1]:+.5f} "
-                             f"{t[2]:+.5f} mm  stable={row.stable}  {row.seconds:.1f} s\n")
+            sys.stderr.write(text + "\n")
             sys.stderr.flush()
 
-    result = run_compare(scene, args.methods, out_dir, comm, progress=progress)
+    result = run_compare(scene, args.methods, out_dir, comm, progress=progress, full=args.full)
     report = result.pop("report")
     payload = envelope(scene, out_dir=out_dir, **result)
     _emit(comm, args, payload, report + f"\n(files in {out_dir})")

@@ -345,6 +345,22 @@ class ANCF(DenseStability):
         x = np.asarray(q[self.tip_dofs], float)
         return A.T @ x - self.e0[self.tip_dofs]
 
+    def root_stress(self, t: float, q: np.ndarray) -> np.ndarray:
+        """sigma_X (Pa) at the four corners of the root section from the section forces there:
+        the elastic force on the root node's coordinates (Eq. 55) minus the line load's share,
+        turned to O-XYZ with A^T, gives the force F = Q_r and, about the root centre, the moment
+        M = sum_s r_s x Q_s over the gradient slots (a rigid rotation d theta moves each gradient
+        by d theta x r_s); then N = -F_X, int Y sigma dA = M_Z, int Z sigma dA = -M_Y, spread
+        linearly over the section as in beam theory."""
+        Q = self.elastic_force(q)
+        Q -= self.scene.load.factor(t) * self.fq
+        A = self.drive.A(t)
+        Qr = Q[:DPN].reshape(SLOTS, 3) @ A               # rows (A^T Q_s)^T
+        er = q[:DPN].reshape(SLOTS, 3) @ A
+        F = Qr[0]
+        M = np.cross(er[1:], Qr[1:]).sum(axis=0)
+        return self.line.shape.axial_stress(0.0, (-F[0], M[2], -M[1]))
+
     # ------------------------------------------------------------------ rotating-frame statics
     def _full(self, x_free: np.ndarray) -> np.ndarray:
         e = self.e0.copy()

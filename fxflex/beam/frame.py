@@ -135,6 +135,8 @@ class FloatingFrameBeam(DenseStability):
                 "fq": _assemble(fq_e, n_full, 6)}
         # int rho X0^T P X0 dV: the undeformed beam's moment of inertia about the axis
         self.I0 = float(rho * np.sum(dx * (sec.A * X**2 + 2 * X * sec.S_Z + sec.I_Z)))
+        # root rows, for the section forces the beam transmits to the clamp (root_stress)
+        self.K_root, self.fq_root = full["K"][:6].copy(), full["fq"][:6].copy()
         f = slice(6, None)                                   # root node clamped
         # contiguous copies: np.dot(view, x, out=) would copy a strided view at every call
         self.M, self.G, self.N, self.K = (np.ascontiguousarray(full[k][f, f]) for k in "MGNK")
@@ -320,6 +322,22 @@ class FloatingFrameBeam(DenseStability):
         if self.absolute:
             m_damp -= self.c_rho * rate * (self.n @ q + q @ (self.N @ q))
         return (float(torque - m_damp),)
+
+    def root_stress(self, t: float, q: np.ndarray) -> np.ndarray:
+        """sigma_X (Pa) at the four corners of the root section from the section forces there:
+        the elastic force on the clamped root node, (K_L W + Q_N(W)) minus the line load's share
+        of it (exact in equilibrium: the support reaction), gives N = -Q_X, int Y sigma dA =
+        Q_thetaZ and int Z sigma dA = -Q_thetaY (U_X = W_X - Y theta_Z + Z theta_Y, Eq. 36);
+        beam theory spreads them linearly over the section (Eq. 40-41)."""
+        Wf = np.zeros(self.n_full)
+        Wf[6:] = q
+        Q = self.K_root @ Wf
+        if self.nonlinear:
+            QN = np.zeros(self.n_full)
+            self.add_nonlinear_force(Wf, QN)
+            Q += QN[:6]
+        Q -= self.scene.load.factor(t) * self.fq_root
+        return self.line.shape.axial_stress(0.0, (-Q[0], Q[5], -Q[4]))
 
     # ------------------------------------------------------------------ steady state and stability
     def _stiffness(self, W: np.ndarray, rate: float) -> np.ndarray:

@@ -29,7 +29,8 @@ from fxflex.formulation import BuildOptions, PAPER_AB_STEP, PAPER_INTEGRATION, b
 from fxflex.scene import Scene
 from fxflex.time import simulate
 
-__all__ = ["run", "time_steps", "steady_table", "closed_form_checks", "PAPER_RATIOS"]
+__all__ = ["run", "time_steps", "tables_5_6", "steady_table", "closed_form_checks",
+           "PAPER_RATIOS"]
 
 #: Sect. 4.1 at 1000 rpm, c3: (beam, solid, allowed relative difference per component %)
 PAPER_RATIOS = (("lebb", "ffrf", (1.5, 1.5, 1.5)), ("nebb", "tlf", (1.3, 1.3, 1.3)),
@@ -39,18 +40,29 @@ UNIFORM = {"geometry.tip_y": 0.12, "geometry.tip_z": 0.06, "geometry.twist_deg":
 
 
 def time_steps(scene: Scene, method: str, force_eval: str | None, integrator: str, dt: float,
-               steps: int) -> dict:
-    """Preprocessing (build) and wall time of ``steps`` steps (tip sampled every 100 steps)."""
+               steps: int, comm=None) -> dict:
+    """Preprocessing (build) and wall time of ``steps`` steps (the tip checked every 100 steps).
+    ``comm`` is needed by the solid methods only (the beams are replicated)."""
     t0 = time.perf_counter()
-    form = build(method, scene, None, BuildOptions(force_eval=force_eval, need_steady=False))
+    form = build(method, scene, comm, BuildOptions(force_eval=force_eval, need_steady=False))
     pre = time.perf_counter() - t0
     cpu0 = time.process_time()
     res = simulate(form, integrator, dt, steps * dt, sample_every=steps)
     cpu = time.process_time() - cpu0
-    return {"method": method, "force_eval": force_eval, "integrator": integrator, "dt_s": dt,
+    return {"method": method, "force_eval": getattr(form, "force_eval", force_eval),
+            "integrator": integrator, "dt_s": dt,
             "n_el": scene.mesh.beam_elements, "dof": form.dof, "preprocess_s": pre,
             "steps": res.steps, "solve_s": res.wall_s, "cpu_s": cpu, "us_per_step": 1e6 * res.wall_s / res.steps,
             "diverged": res.diverged is not None}
+
+
+def tables_5_6(scene: Scene, counts, steps: int) -> list[dict]:
+    """The paper's Tables 5 (NEBB-AB) and 6 (ANCF-CD): invariant against element force
+    evaluation for each element count, ``steps`` steps at dt = 0.02 us (Sect. 4.2)."""
+    return [time_steps(scene.replace(**{"mesh.beam_elements": n}), m, fe, integ, PAPER_AB_STEP,
+                       steps)
+            for m, integ in (("nebb", "ab2"), ("ancf", "cd"))
+            for n in counts for fe in ("invariant", "element")]
 
 
 def _steady(scene: Scene, method: str) -> dict:
@@ -115,10 +127,7 @@ def run(scene: Scene, out_dir: str, comm, quick: bool = False) -> dict:
                   ("ancf", "invariant"), ("ancf", "element")):
         integ, dt = PAPER_INTEGRATION[m]
         speed.append(time_steps(default, m, fe, integ, dt, steps))
-    tables56 = [time_steps(default.replace(**{"mesh.beam_elements": n}), m, fe, integ,
-                           PAPER_AB_STEP, steps)
-                for m, integ in (("nebb", "ab2"), ("ancf", "cd"))
-                for n in eff_counts for fe in ("invariant", "element")]
+    tables56 = tables_5_6(default, eff_counts, steps)
     checks = closed_form_checks(scene)
     steady = steady_table(scene, (1000.0, 5000.0, 10000.0), counts)
     solids = {} if quick else _solid_steady(default, comm)

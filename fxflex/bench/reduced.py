@@ -19,58 +19,13 @@ import time
 import numpy as np
 
 from fxflex import cache
-from fxflex.scene import Scene, load_scene
-from fxflex.solid.cms import ClampedModes, clamped_modes
+from fxflex.analysis.signals import growth_fit, hann_mean
+from fxflex.scene import Scene
+from fxflex.solid.family import ReducedFamily
 from fxflex.solid.ffrf import FFRF
 from fxflex.solid.gcms import GCMS
-from fxflex.solid.model import SolidModel
-from fxflex.solid.reduced import MeshData, mesh_data
 
 __all__ = ["ReducedFamily", "hann_mean", "growth_fit", "run"]
-
-#: scene sections a :class:`ReducedFamily` may vary without rebuilding mesh, operators or modes
-_SHARED_SECTIONS = ("rotation", "damping", "reduction")
-
-
-class ReducedFamily:
-    """One mesh with its assembled operators and clamped modes, and every FFRF / GCMS of scenes
-    that differ from ``base`` only in speed, damping or reduction (studies over modes, speeds,
-    Gram cuts). ``count`` modes are computed once; builds use the first ones they need."""
-
-    def __init__(self, base: Scene, comm, count: int = 60):
-        self.base, self.comm = base, comm
-        t0 = time.perf_counter()
-        self.model = SolidModel(base, comm)
-        self.data: MeshData = mesh_data(self.model)
-        t1 = time.perf_counter()
-        self.modes: ClampedModes = clamped_modes(self.model, count, K=self.data.K, M=self.data.M)
-        self.timings = {"mesh_assemble": t1 - t0, "eigenmodes": time.perf_counter() - t1}
-
-    def scene(self, *overrides: str) -> Scene:
-        for text in overrides:
-            section = text.split("=", 1)[0].split(".", 1)[0]
-            if section not in _SHARED_SECTIONS:
-                raise ValueError(f"{text}: a family only varies {', '.join(_SHARED_SECTIONS)}")
-        return load_scene(overrides=overrides, base=self.base)
-
-    def build(self, method: str, *overrides: str) -> FFRF | GCMS:
-        cls = {"ffrf": FFRF, "gcms": GCMS}[method]
-        return cls(self.scene(*overrides), self.comm, model=self.model, data=self.data,
-                   modes=self.modes)
-
-
-def hann_mean(t: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Hann-weighted mean of the columns of y(t) over the sampled window. An oscillation with n
-    cycles in the window leaks about 1/(pi n^3) of its amplitude into it (plain mean: 1/(pi n)),
-    so a window of a few periods of the lowest mode suffices."""
-    w = 0.5 - 0.5 * np.cos(2 * np.pi * (t - t[0]) / (t[-1] - t[0]))
-    return (w[:, None] * y).sum(axis=0) / w.sum()
-
-
-def growth_fit(t: np.ndarray, amplitude: np.ndarray) -> float:
-    """Least-squares slope of log(amplitude) against t (1/s)."""
-    return float(np.polyfit(t, np.log(amplitude), 1)[0])
-
 
 COMPONENTS = ("longitudinal", "orthogonal", "load")
 

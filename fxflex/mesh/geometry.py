@@ -16,6 +16,10 @@ principal ones of the rectangle (I~_y = int z~^2 dA = b h^3 / 12, I~_z = int y~^
 
 and the Saint-Venant torsion constant of the rectangle (long side a, short side c) by its series
 J = a c^3 / 3 [1 - 192 c / (pi^5 a) sum_{n odd} tanh(n pi a / (2 c)) / n^5].
+
+Axial stress over a section from its stress resultants (:meth:`BeamShape.axial_stress`): beam
+theory's linear distribution sigma_X = a + b Y + c Z (the strain of Eq. 40 times E) is fixed by
+N = int sigma_X dA, int Y sigma_X dA and int Z sigma_X dA through the section properties above.
 """
 
 from __future__ import annotations
@@ -96,6 +100,25 @@ class BeamShape:
             I_Y=s2 * Iz_loc + c2 * Iy_loc, I_Z=c2 * Iz_loc + s2 * Iy_loc,
             I_YZ=sc * (Iz_loc - Iy_loc), J_polar=Iy_loc + Iz_loc,
             J_saint_venant=saint_venant_rectangle(b, h))
+
+    def corners(self, x: float) -> np.ndarray:
+        """(4, 2): (Y, Z) of the four corners of the section at distance x from the root."""
+        b, h, _ = self.sizes(x)
+        yt = 0.5 * b * np.array([1.0, -1.0, -1.0, 1.0])
+        zt = 0.5 * h * np.array([1.0, 1.0, -1.0, -1.0])
+        _, Y, Z = self.point(x, yt, zt)
+        return np.column_stack([Y, Z])
+
+    def axial_stress(self, x: float, resultants) -> np.ndarray:
+        """sigma_X (Pa) at the four :meth:`corners` of the section at x from the resultants
+        (N, int Y sigma_X dA, int Z sigma_X dA): solve [[A, S_Z, S_Y], [S_Z, I_Z, I_YZ],
+        [S_Y, I_YZ, I_Y]] (a, b, c) = resultants for sigma_X = a + b Y + c Z."""
+        p = self.section(np.asarray(float(x)))
+        G = np.array([[p.A, p.S_Z, p.S_Y], [p.S_Z, p.I_Z, p.I_YZ], [p.S_Y, p.I_YZ, p.I_Y]],
+                     dtype=float)
+        a, b, c = np.linalg.solve(G, np.asarray(resultants, dtype=float))
+        yz = self.corners(x)
+        return a + b * yz[:, 0] + c * yz[:, 1]
 
     def volume(self) -> float:
         """Exact volume: int_0^L b(x) h(x) dx (the twist does not change it)."""

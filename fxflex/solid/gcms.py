@@ -271,6 +271,10 @@ class GCMS(ReducedFormulation):
         """U_tip = A^T u_f,tip: the rigid rotation removed (SPEC section 2)."""
         return rotation_z(self.drive.angle(t)).T @ (self.gm.tip @ q)
 
+    def rotating_coordinates(self, t: float, q: np.ndarray) -> np.ndarray:
+        """zeta = R(phi)^T xi: U = A^T u_f = Psi~ R^T xi, since A_d Psi~ = Psi~ R."""
+        return self.rotation(self.drive.angle(t)).T @ q
+
     def nodal_basis(self) -> tuple[np.ndarray, bool]:
         """Psi~ = [P_d Phi, S_d Phi, G3_d Phi] T, rebuilt on demand (n_owned x r)."""
         Phi = self.modes.vectors[:, : self.scene.reduction.gcms_modes // 3]

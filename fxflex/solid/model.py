@@ -67,6 +67,7 @@ class SolidModel:
         self.u_trial = ufl.TrialFunction(self.V)
         self._locate_centerline()
         self.rho = scene.material.rho
+        self._root_sections: dict = {}
         self._tip_face = None
 
     # -- geometry --------------------------------------------------------------------------------
@@ -192,6 +193,15 @@ class SolidModel:
             for fi, vec in zip(f, self.tip_traction_vectors()):
                 b.axpy(fi, vec)
         return b
+
+    def root_section(self, law: str = "hooke"):
+        """The :class:`fxflex.solid.section.RootSection` of this mesh for a stress law, built once
+        (collective on the first call)."""
+        from fxflex.solid.section import RootSection
+
+        if law not in self._root_sections:
+            self._root_sections[law] = RootSection(self, law)
+        return self._root_sections[law]
 
     # -- probe ------------------------------------------------------------------------------------
     def tip_displacement(self, array: np.ndarray) -> np.ndarray:

@@ -225,6 +225,7 @@ class ReducedFormulation(DenseStability):
         # at rest (0 rpm) a spin-up is no spin-up: every rotation term is identically zero
         self.constant_speed = scene.rotation.profile == "constant" or self.drive.at_rest
         self.timings: dict[str, float] = {}
+        self._root_map: np.ndarray | None = None
         self._lu: DenseLU | None = None
 
     # -- Formulation interface ---------------------------------------------------------------
@@ -341,6 +342,20 @@ class ReducedFormulation(DenseStability):
         """(B, inertial): this rank's owned displacement entries are B q, measured in o-xyz when
         ``inertial`` (GCMS) and in O-XYZ otherwise (FFRF)."""
         raise NotImplementedError
+
+    def rotating_coordinates(self, t: float, q: np.ndarray) -> np.ndarray:
+        """z with U = B z in O-XYZ (B from :meth:`nodal_basis`) for the state q at time t."""
+        return q
+
+    def root_stress(self, t: float, q: np.ndarray) -> np.ndarray:
+        """sigma_X (Pa) at the four corners of the root section: the resultants of the Hooke
+        stress (Eq. 12-14) in the root cells (:mod:`fxflex.solid.section`), linear in z, so
+        projected on the basis once (first call collective on the build communicator)."""
+        if self._root_map is None:
+            basis, _ = self.nodal_basis()
+            self._root_map = self.model.root_section("hooke").resultant_matrix(basis)
+        return self.model.shape.axial_stress(
+            0.0, self._root_map @ self.rotating_coordinates(t, q))
 
     # -- mesh, operators and modes: built when first asked for ------------------------------------
     def _use(self, count: int, model: SolidModel | None, data: MeshData | None, modes) -> bool:

@@ -192,6 +192,7 @@ class TLF:
         self._dyn: _Dynamics | None = None
         self._tangent: HubTangent | None = None
         self._omega_max: float | None = None
+        self._root: tuple | None = None
         self._steady: SteadyState | None = None
         self._modes: tuple[np.ndarray, np.ndarray] | None = None
         if not options.need_steady:
@@ -333,6 +334,18 @@ class TLF:
     def field_writer(self, path: str) -> "FieldWriter":
         """``--fields``: an XDMF series of the displacement for ParaView (rank-collective)."""
         return FieldWriter(self, path)
+
+    def root_stress(self, t: float, q: np.ndarray) -> np.ndarray:
+        """sigma_X (Pa) at the four corners of the root section: the resultants of the SVK
+        stress (Eq. 30-33) in the root cells on U = A^T (x0 + u) - x0 (the steady state's q is U
+        itself, at phi = 0), spread linearly over the section (:mod:`fxflex.solid.section`).
+        Collective on ``comm``."""
+        if self._root is None:
+            self._root = (self.model.root_section("svk"), self.model.node_coordinates())
+        section, x0 = self._root
+        A = rotation_z(self.drive.angle(t))
+        U = ((x0 + q.reshape(-1, 3)) @ A - x0).reshape(-1)
+        return self.model.shape.axial_stress(0.0, section.resultants(U))
 
     def tangent(self, q: np.ndarray) -> PETSc.Mat:
         """The tangent stiffness dQ_k/du at the owned displacements q (o-xyz, no constraints):

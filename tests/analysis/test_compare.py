@@ -1,40 +1,134 @@
-"""fxflex compare: every method x speed row, the SPEC section 7 figures, files as it goes."""
+"""fxflex compare: every study on a coarse scene with short windows, the SPEC section 7 rows,
+the damping models, the files, and --full's estimate."""
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fxflex.analysis.compare import paper_rows, run_compare
-from fxflex.scene import PAPER_RPM, load_scene
+from fxflex.analysis.compare import SAMPLE_DT, SteadyRow, paper_rows, plan, run_compare
+from fxflex.io.series import read_series
+from fxflex.scene import METHODS, PAPER_RPM, load_scene
+
+COARSE = ["mesh.solid=[10,2,2]", "mesh.beam_elements=4"]
+#: every SPEC section 7 figure the report must carry when all six methods run (by label start)
+SPEC7 = ["LEBB vs FFRF, longitudinal", "LEBB vs FFRF, orthogonal", "LEBB vs FFRF, load",
+         "GCMS vs FFRF, longitudinal", "GCMS vs FFRF, orthogonal", "GCMS vs FFRF, load",
+         "NEBB vs TLF, longitudinal", "NEBB vs TLF, orthogonal",
+         "NEBB vs TLF, load", "ANCF vs TLF, longitudinal", "ANCF vs TLF, orthogonal",
+         "ANCF vs TLF, load", "Omega1: TLF orthogonal smaller", "Omega1: TLF load smaller",
+         "Omega2: TLF orthogonal smaller", "Omega2: TLF load smaller",
+         "FFRF orthogonal increase", "FFRF load increase", "TLF orthogonal decrease",
+         "TLF load decrease", "TLF longitudinal 5000 rpm", "TLF longitudinal 10000 rpm",
+         *[f"{m.upper()} converges at Omega3: transient" for m in METHODS],
+         *[f"{m.upper()} converges at Omega3: stable" for m in ("ffrf", "gcms", "lebb", "nebb",
+                                                               "ancf")],
+         "Relative model: convergent deflection independent of c",
+         "Absolute model: convergent orthogonal deflection depends on c",
+         "Absolute model, Omega1", "Absolute model, Omega3",
+         "Sect. 4.2: ANCF-CD", "Sect. 4.2: TLF-CD", "Sect. 4.2: NEBB-AB"]
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    out = tmp_path_factory.mktemp("compare")
+    lines = []
+    res = run_compare(load_scene(overrides=COARSE), list(METHODS), str(out), MPI.COMM_WORLD,
+                      progress=lines.append, paper_window=4e-4,
+                      tlf_windows={"speeds": 2e-4, "steps": 1e-4, "damping": 1e-4})
+    return res, out, lines
 
 
 @pytest.mark.serial
-def test_compare_small_scene(tmp_path):
-    scene = load_scene(overrides=["mesh.solid=[10,2,2]", "mesh.beam_elements=4"])
-    res = run_compare(scene, ["tlf", "lebb", "nebb"], str(tmp_path), MPI.COMM_WORLD)
-    assert [(r["method"], r["rpm"]) for r in res["steady"]] == [
-        (m, r) for m in ("tlf", "lebb", "nebb") for r in PAPER_RPM]
-    csv = (tmp_path / "steady.csv").read_text().splitlines()
-    assert len(csv) == 1 + 9 and csv[0].startswith("method,rpm,longitudinal_m")
-    data = json.loads((tmp_path / "results.json").read_text())
-    figures = {f["figure"]: f for f in data["paper"]}
-    assert "NEBB vs TLF, load, Omega1 (|diff| %)" in figures
-    assert figures["LEBB converges at Omega3 (stable equilibrium)"]["ours"] is False
-    assert "| figure | ours | paper |" in (tmp_path / "report.md").read_text()
+def test_report_has_every_spec_row_with_ours_and_the_paper(study):
+    res, out, lines = study
+    report = (out / "report.md").read_text()
+    figures = {f["figure"]: f for f in res["paper"]}
+    for label in SPEC7:
+        hits = [f for name, f in figures.items() if name.startswith(label)]
+        assert hits, label
+        for f in hits:
+            row = next(r for r in report.splitlines() if r.startswith("| " + f["figure"]
+                                                                     .replace("|", "\\|")))
+            cells = [c.strip() for c in row.split(" | ")]
+            assert cells[2] == str(f["paper"]) and cells[-1].rstrip(" |") in ("pass", "FAIL")
+    assert res["finished"] is True and any(t.startswith("estimate:") for t in lines)
+
+
+@pytest.mark.serial
+def test_files_plots_and_series(study):
+    res, out, _ = study
+    for name in ("steady.csv", "damping_steady.csv", "transients.csv", "paper.csv"):
+        assert len((out / name).read_text().splitlines()) > 1, name
+    assert len((out / "steady.csv").read_text().splitlines()) == 1 + 6 * 3
+    assert len((out / "damping_steady.csv").read_text().splitlines()) == 1 + 6 * 2 * 2 * 3
+    for fig in res["figures"]:
+        assert (out / fig).read_bytes()[:4] == b"\x89PNG"
+    assert {"fig4_1000rpm.png", "fig5_steps.png", "fig11_absolute_10000rpm.png",
+            "drive_torque.png", "damping_steady.png"} <= set(res["figures"])
+    cases = plan(list(METHODS), False)
+    series = sorted(p.name for p in (out / "series").iterdir())
+    assert len(series) == len({c.key for cs in cases.values() for c in cs})
+    meta, columns, data = read_series(out / "series" / series[0])
+    assert columns[:4] == ["t_s", "longitudinal_m", "orthogonal_m", "load_m"]
+    assert columns[-2:] == ["sigma_root_max_Pa", "sigma_root_min_Pa"] and len(data) > 2
+    assert meta["method"] in METHODS
+    assert json.loads((out / "results.json").read_text())["finished"] is True
+    # a run that diverged stopped early; the others reached their window (to within a sample)
+    assert all(s["diverged"] or s["t_reached_s"] >= s["case"]["t_end"] - SAMPLE_DT
+               - s["case"]["dt"] for s in res["transients"])
+
+
+@pytest.mark.serial
+def test_damping_models(study):
+    """Relative damping: the equilibrium does not move with c; absolute: it does, and at 10000 rpm
+    |orthogonal| grows with c for the nonlinear methods (Sect. 4.3)."""
+    res, _, _ = study
+    rows = res["damping_steady"]
+    for m in METHODS:
+        for rpm in (PAPER_RPM[0], PAPER_RPM[2]):
+            rel = np.array([r["tip_mm"] for r in rows if (r["method"], r["rpm"], r["model"])
+                            == (m, rpm, "relative")])
+            absd = [r["tip_mm"][1] for r in sorted(rows, key=lambda r: r["c"])
+                    if (r["method"], r["rpm"], r["model"]) == (m, rpm, "absolute")]
+            assert len(rel) == 3 and np.ptp(rel, axis=0).max() <= 1e-12 * np.abs(rel).max()
+            assert abs(absd[2] - absd[0]) > 1e-7 * abs(absd[0]), (m, rpm)
+            if rpm == PAPER_RPM[2] and m in ("tlf", "nebb", "ancf"):
+                assert abs(absd[0]) < abs(absd[1]) < abs(absd[2])
+    def row(start):
+        return next(f for f in res["paper"] if f["figure"].startswith(start))
+
+    assert row("Relative model: convergent deflection independent of c")["pass"] is True
+    assert row("Absolute model: convergent orthogonal deflection depends")["pass"] is True
+    assert row("Absolute model, Omega3: |orthogonal| grows with c")["pass"] is True
 
 
 def test_paper_rows_arithmetic():
-    class Row:
-        def __init__(self, method, rpm, tip):
-            self.method, self.rpm, self.tip_m, self.stable = method, rpm, np.array(tip), None
-
     o1, o2, _ = PAPER_RPM
-    rows = [Row("ffrf", o1, [1.0, -1.0, -2.0]), Row("tlf", o1, [1.0, -0.8, -1.0]),
-            Row("ffrf", o2, [1.0, -3.0, -2.5]), Row("tlf", o2, [1.0, -0.4, -0.75])]
+    rows = [SteadyRow("ffrf", o1, np.array([1.0, -1.0, -2.0]), None, True, 1, 0.0),
+            SteadyRow("tlf", o1, np.array([1.0, -0.8, -1.0]), None, True, 1, 0.0),
+            SteadyRow("ffrf", o2, np.array([1.0, -3.0, -2.5]), None, True, 1, 0.0),
+            SteadyRow("tlf", o2, np.array([1.0, -0.4, -0.75]), None, True, 1, 0.0)]
     got = {f["figure"]: f["ours"] for f in paper_rows(rows)}
     assert got["Omega1: TLF orthogonal smaller than FFRF (%)"] == pytest.approx(20.0)
     assert got["Omega1: TLF load smaller than FFRF (%)"] == pytest.approx(50.0)
     assert got["FFRF orthogonal increase Omega1->Omega2 (%)"] == pytest.approx(200.0)
     assert got["TLF load decrease Omega1->Omega2 (%)"] == pytest.approx(25.0)
+
+
+@pytest.mark.serial
+def test_full_prints_its_estimate_first(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "fxflex", "compare", "--full", "--methods", "lebb",
+                        "--out", str(tmp_path / "c"), "--json", *sum((["--set", s] for s in
+                                                                     COARSE), [])],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    err = r.stderr
+    assert "estimate:" in err and err.index("estimate:") < err.index("[2/6]")
+    d = json.loads(r.stdout)
+    assert d["full"] is True and d["windows"]["tlf_s"] is None
+    assert d["estimate"]["runs"] == 5 and d["estimate"]["total_s"] > 0
+    assert {s["case"]["t_end"] for s in d["transients"]} == {0.02}

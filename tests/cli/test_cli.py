@@ -31,6 +31,7 @@ def run(*args, cwd=None):
     (["run", "--method", "tlf", "--out", "/nonexistent/dir/x.csv"], "--out"),
     (["bench", "nosuch"], "nosuch"),
     (["bench", "steady", "--reference"], "--reference"),
+    (["compare", "--methods", "ffrf,fem"], "fem"),
     (["run", "--method", "lebb", "--integrator", "generalized-alpha", "--rho-inf", "1.5"],
      "--rho-inf"),
     (["run", "--method", "ancf", "--rho-inf", "0.5"], "--rho-inf"),

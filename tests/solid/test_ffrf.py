@@ -15,7 +15,8 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
-from fxflex.bench.reduced import ReducedFamily, growth_fit, hann_mean
+from fxflex.analysis.signals import growth_fit, hann_mean
+from fxflex.solid.family import ReducedFamily
 from fxflex.scene import load_scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
 from fxflex.solid.linear import linear_steady

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fxflex.bench.reduced import ReducedFamily
+from fxflex.solid.family import ReducedFamily
 from fxflex.scene import load_scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
 from fxflex.solid.ffrf import FFRF
