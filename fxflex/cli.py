@@ -129,6 +129,15 @@ def make_parser() -> argparse.ArgumentParser:
                    help="samples between field snapshots, default 100")
     p.add_argument("--sample-dt", type=_positive("--sample-dt"), metavar="DT",
                    help="output interval (s); default max(dt, t_end/20000)")
+    p.add_argument("--checkpoint", metavar="FILE",
+                   help="write a checkpoint (.npz, atomically replaced) every "
+                        "--checkpoint-every steps")
+    p.add_argument("--checkpoint-every", type=int, metavar="N",
+                   help="steps between checkpoints; default 5 %% of the run (with --checkpoint) "
+                        "or the resumed run's; without --checkpoint it writes FILE.csv.ckpt")
+    p.add_argument("--resume", metavar="CHECKPOINT",
+                   help="continue the run a checkpoint belongs to (same scene and run options): "
+                        "the series is cut back to the checkpoint and appended")
     _common(p)
 
     p = sub.add_parser("modes", help="modes and stability of the motion about the rotating "
@@ -263,7 +272,11 @@ def cmd_steady(args, comm) -> None:
 def cmd_run(args, comm) -> None:
     from fxflex.formulation import BuildOptions, build, check_options, default_integration
     from fxflex.io import Progress, SeriesWriter, envelope, tip_mm
-    from fxflex.time import diagnose, simulate
+    from fxflex.io.checkpoint import (FORMAT, CheckpointWriter, Layout, check_settings,
+                                      load_checkpoint)
+    from fxflex.io.series import prefix_digest
+    from fxflex.time import Resume, diagnose, simulate
+    from fxflex.time.diagnosis import ab2_warning
 
     scene = _scene_from_args(args)
     options = BuildOptions(force_eval=args.force_eval, mass=args.mass, need_steady=False)
@@ -283,35 +296,97 @@ def cmd_run(args, comm) -> None:
     elif args.rho_inf is not None:
         raise FxflexError(f"--rho-inf: only applies to --integrator generalized-alpha "
                           f"(the integrator is {integrator})")
-    for flag in ("out", "fields"):
+    for flag in ("out", "fields", "checkpoint"):
         path = getattr(args, flag)
         if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
             raise FxflexError(f"--{flag}: directory does not exist: "
                               f"{os.path.dirname(os.path.abspath(path))}")
     if args.fields_every < 1:
         raise FxflexError(f"--fields-every: must be >= 1, got {args.fields_every}")
+    if args.checkpoint_every is not None and args.checkpoint_every < 1:
+        raise FxflexError(f"--checkpoint-every: must be >= 1 step, got {args.checkpoint_every}")
+    out_path, ckpt_path, ckpt_every = args.out, args.checkpoint, args.checkpoint_every
+    resumed = series = None
+    if args.resume:
+        if args.fields:
+            raise FxflexError("--fields: cannot be combined with --resume (an XDMF series "
+                              "cannot be continued); write the fields in a run of its own")
+        resumed, arrays = load_checkpoint(args.resume, comm)
+        series = resumed.get("series")
+        if series is None and args.out:
+            raise FxflexError("--out: the checkpointed run wrote no series; resume without --out")
+        out_path = args.out or (series["path"] if series else None)
+    nsteps = max(int(round(args.t_end / dt)), 1)
+    sample_dt = args.sample_dt or max(dt, args.t_end / 20000)
+    sample_every = max(1, int(round(sample_dt / dt)))
+    if not (out_path or args.fields):
+        sample_every = nsteps       # nothing to write: only the final deflection is reported
+    settings = {"method": args.method, "integrator": integrator, "dt_s": dt,
+                "t_end_s": args.t_end, "t0_s": 0.0, "sample_every": sample_every,
+                "rho_inf": rho_inf}
+    if resumed is not None:
+        check_settings(resumed, scene.to_dict(), scene.hash, settings, args.resume)
+        if series is not None:
+            ok = None
+            if comm.rank == 0:
+                ok = (os.path.isfile(out_path)
+                      and prefix_digest(out_path, series["bytes"]) == series["sha256"])
+            if not comm.bcast(ok, root=0):
+                raise FxflexError(f"--resume: {out_path} does not begin with the "
+                                  f"{series['bytes']} bytes the checkpoint recorded (a different "
+                                  "or shortened file); pass the run's series with --out")
+        ckpt_path = ckpt_path or resumed["checkpoint"]["path"]
+        ckpt_every = ckpt_every or resumed["checkpoint"]["every"]
+    if ckpt_every is not None and ckpt_path is None:
+        if not out_path:
+            raise FxflexError("--checkpoint-every: needs --checkpoint FILE (or --out FILE.csv, "
+                              "whose name + .ckpt is then used)")
+        ckpt_path = out_path + ".ckpt"
+    if ckpt_path is not None and ckpt_every is None:
+        ckpt_every = max(nsteps // 20, 1)         # every 5 % of the run
     t0 = time.perf_counter()
     form = build(args.method, scene, comm, options)
     t_pre = time.perf_counter() - t0
+    settings.update(force_eval=getattr(form, "force_eval", None),
+                    mass=getattr(form, "mass_kind", None))
+    if resumed is not None:
+        check_settings(resumed, scene.to_dict(), scene.hash, settings, args.resume)
+    layout = Layout(form) if (ckpt_path or resumed) else None
+    state = resume = None
+    if resumed is not None:
+        state = (layout.scatter(arrays["q"] if comm.rank == 0 else None),
+                 layout.scatter(arrays["v"] if comm.rank == 0 else None))
+        names = comm.bcast([k[7:] for k in arrays if k.startswith("scheme/")]
+                           if comm.rank == 0 else None, root=0)
+        history = {n: layout.scatter(arrays[f"scheme/{n}"] if comm.rank == 0 else None)
+                   for n in names}
+        resume = Resume(step=resumed["step"], arrays=history, samples=resumed["samples"])
     fields = None
     if args.fields:
         open_fields = getattr(form, "field_writer", None)
         if open_fields is None:
             raise FxflexError(f"--fields: not available for {args.method} (solid methods only)")
         fields = open_fields(args.fields)
-    nsteps = max(int(round(args.t_end / dt)), 1)
-    sample_dt = args.sample_dt or max(dt, args.t_end / 20000)
-    sample_every = max(1, int(round(sample_dt / dt)))
-    if not (args.out or args.fields):
-        sample_every = nsteps       # nothing to write: only the final deflection is reported
     extra_cols = list(getattr(form, "extra_columns", []))
     columns = ["t_s", "longitudinal_m", "orthogonal_m", "load_m"] + extra_cols
     implicit = {"rho_inf": rho_inf} if rho_inf is not None else {}
     meta = envelope(scene, method=args.method, integrator=integrator, dt_s=dt, **implicit,
-                    t_end_s=args.t_end, dof=form.dof, force_eval=getattr(form, "force_eval", None),
-                    mass=getattr(form, "mass_kind", None))
-    writer = SeriesWriter(args.out, meta, columns, enabled=bool(args.out) and comm.rank == 0) \
-        if args.out else None
+                    t_end_s=args.t_end, dof=form.dof, force_eval=settings["force_eval"],
+                    mass=settings["mass"])
+    writer = None
+    if out_path:
+        writer = SeriesWriter(out_path, meta, columns, enabled=comm.rank == 0,
+                              resume=(series["bytes"], series["sha256"]) if series else None)
+    checkpoint = None
+    if ckpt_path:
+        checkpoint = CheckpointWriter(
+            ckpt_path, layout, {"format": FORMAT, "fxflex_version": __version__,
+                                "scene": scene.to_dict(), "scene_hash": scene.hash,
+                                "settings": settings, "layout": layout.kind, "ranks": comm.size,
+                                "dof": form.dof, "series": None,
+                                "checkpoint": {"path": os.path.abspath(ckpt_path),
+                                               "every": ckpt_every}},
+            series=writer)
     progress = Progress(nsteps, f"{args.method} {integrator} dt={dt:.3g}",
                         enabled=comm.rank == 0)
 
@@ -327,7 +402,8 @@ def cmd_run(args, comm) -> None:
     try:
         res = simulate(form, integrator, dt, args.t_end, sample_every=sample_every,
                        on_sample=on_sample if writer or fields else None, progress=progress,
-                       extras=writer is not None, rho_inf=rho_inf)
+                       extras=writer is not None, rho_inf=rho_inf, state=state, resume=resume,
+                       checkpoint_every=ckpt_every or 0, on_checkpoint=checkpoint)
     finally:
         if writer is not None:
             writer.close()
@@ -335,29 +411,50 @@ def cmd_run(args, comm) -> None:
             fields.close()
     progress.close(f"{res.steps} steps")
     diverged = diagnose(form, integrator, dt, res) if res.diverged else None
+    warnings = []
+    if diverged is None and integrator == "ab2":
+        note = ab2_warning(form, dt, res.t)
+        if note:
+            warnings.append(note)
+            log.warning(note)
     if rho_inf is not None:
         implicit["newton"] = res.stats
     stable_fn = getattr(form, "stable", None)     # of the equilibrium at the final speed
     verdict = stable_fn() if callable(stable_fn) else None
+    first = resume.step if resume else 0
+    ckpt_info = None if checkpoint is None else {
+        "path": checkpoint.path, "every": ckpt_every, "written": checkpoint.written,
+        "seconds": checkpoint.seconds}
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        integrator=integrator, dt_s=dt, **implicit, t_end_s=args.t_end, t_s=res.t,
                        steps=res.steps, tip_mm=tip_mm(res.tip), stable=verdict,
-                       diverged=diverged, series=os.path.abspath(args.out) if args.out else None,
+                       diverged=diverged, warnings=warnings,
+                       series=os.path.abspath(out_path) if out_path else None,
+                       resumed_from_step=resume.step if resume else None,
+                       checkpoint=ckpt_info,
                        timings_s={"preprocess": t_pre, "solve": res.wall_s},
                        detail_timings_s=form.timings)
     text = (f"{args.method} {integrator} dt={dt:.3g} s, {res.steps} steps to t={res.t:.6g} s "
             f"(dof {form.dof})\n  tip: {_fmt_tip(tip_mm(res.tip))}\n"
             f"  preprocess {t_pre:.2f} s, solve {res.wall_s:.2f} s"
-            + (f" ({1e6 * res.wall_s / res.steps:.1f} us/step)" if res.steps else ""))
+            + (f" ({1e6 * res.wall_s / (res.steps - first):.1f} us/step)"
+               if res.steps > first else ""))
+    if resume:
+        text += f"\n  resumed from step {resume.step} of {args.resume}"
     if rho_inf is not None:
         st = res.stats
         text += (f"\n  generalized-alpha rho_inf {rho_inf:g}: {st['iterations']} Newton iterations, "
                  f"{st['factorizations']} factorisations, {st['halvings']} step halvings")
     if diverged:
-        text += (f"\n  DIVERGED at t={diverged['time_s']:.6g} s: {diverged['cause']} -- "
-                 f"{diverged['detail']}")
-    if args.out:
-        text += f"\n  series: {args.out}"
+        text += (f"\n  STOPPED at t={diverged['time_s']:.6g} s: {diverged['cause']} -- "
+                 f"{diverged['detail']}\n  (deflection above: the last finite check, "
+                 f"t={res.t:.6g} s)")
+    for note in warnings:
+        text += f"\n  WARNING: {note}"
+    if out_path:
+        text += f"\n  series: {out_path}"
+    if checkpoint is not None:
+        text += f"\n  checkpoints: {checkpoint.written} written to {checkpoint.path}"
     _emit(comm, args, payload, text)
 
 
@@ -492,6 +589,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except SystemExit as exc:       # --help, --version, or a command's own status
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    except MemoryError:
+        if comm.rank == 0:
+            sys.stderr.write("fxflex: error: out of memory: the scene's mesh or model is too "
+                             "large for this machine (reduce mesh.solid, mesh.beam_elements or "
+                             "the number of modes)\n")
+        return 2
     except KeyboardInterrupt:
         if comm.rank == 0:
             sys.stderr.write("\nfxflex: interrupted\n")

@@ -15,6 +15,13 @@ method also offers ``linearise()`` -> (M, C, K) (dense, or PETSc matrices for TL
 ``rotating_modes(pairs)`` -> the lowest roots and mode vectors, ``mode_tip(X)`` -> the tip
 section's translation and rotation in them, ``growth_rate()`` and ``stable()``.
 
+Robustness (docs/robustness.md), optional: ``deflection_range`` -- the deflection, in lengths,
+beyond which a run stops (default 0.25; TLF and ANCF, geometrically exact, 2); ``omega_max()`` --
+the highest circular frequency, for step limits; ``rotating_state(t, q, v)`` -> (z, z') in the
+coordinates of a dense ``linearise()`` (the energy of long runs); ``state_points()`` -> the
+undeformed coordinates of the owned nodes of a distributed state (TLF), by which checkpoints
+order it independently of the partition.
+
 Implicit integration (:class:`Implicit`, used by ``generalized-alpha``): the same equations written
 on the free coordinates as M q'' = F(t, q, q'), with the tangents K_t = -dF/dq and C_t = -dF/dq'
 folded into one factorised iteration matrix S = m M + c C_t + k K_t.
@@ -163,8 +170,11 @@ def check_options(method: str, options: BuildOptions) -> None:
 
 def build(method: str, scene: Scene, comm, options: BuildOptions | None = None) -> Formulation:
     """Build ``method`` for ``scene`` on communicator ``comm``."""
+    from fxflex.scene.load import validate_for
+
     options = options or BuildOptions()
     check_options(method, options)
+    validate_for(method, scene)
     try:
         module = importlib.import_module(_MODULES[method])
     except ModuleNotFoundError as exc:

@@ -102,6 +102,9 @@ class ANCF(DenseStability):
 
     method = "ancf"
     extra_columns: tuple[str, ...] = ()
+    #: geometrically exact (absolute coordinates, Green-Lagrange strain): a run stops only beyond
+    #: 2 L of deflection (fxflex.time.driver.divergence_limit)
+    deflection_range = 2.0
 
     def __init__(self, scene: Scene, force_eval: str | None = None):
         from mpi4py import MPI
@@ -344,6 +347,17 @@ class ANCF(DenseStability):
         A = self.drive.A(t)
         x = np.asarray(q[self.tip_dofs], float)
         return A.T @ x - self.e0[self.tip_dofs]
+
+    def rotating_state(self, t: float, q: np.ndarray, v: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """(z, z') on the free coordinates in the rotating frame, as :meth:`linearise` and
+        ``steady_state().q`` use them: each slot turned back, A^T e, and A^T (e' - phi' S e)."""
+        phi, rate, _ = self.drive.state(t)
+        A = rotation_z(phi)
+        e3, v3 = q.reshape(-1, 3), v.reshape(-1, 3)
+        z = (e3 @ A).reshape(-1)                         # rows e^T A = (A^T e)^T
+        zd = ((v3 - rate * e3 @ S3.T) @ A).reshape(-1)
+        return z[self.free_dofs], zd[self.free_dofs]
 
     def root_stress(self, t: float, q: np.ndarray) -> np.ndarray:
         """sigma_X (Pa) at the four corners of the root section from the section forces there:

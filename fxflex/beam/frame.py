@@ -300,6 +300,11 @@ class FloatingFrameBeam(DenseStability):
         """W_X, W_Y, W_Z of the free-end node: already relative and in O-XYZ."""
         return np.array(q[-6:-3], dtype=float)
 
+    def rotating_state(self, t: float, q: np.ndarray, v: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """(W, W') in the coordinates of :meth:`linearise`: the relative coordinates themselves."""
+        return q, v
+
     def extras(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[float]:
         """Drive torque about z (N m) from the eliminated reference rows: d/dt of the angular
         momentum about the axis minus the moments of the loads and of the damping force.

@@ -13,10 +13,23 @@ import tomllib
 import typing
 from collections.abc import Iterable, Mapping
 
+import numpy as np
+
 from fxflex.errors import SceneError
 from fxflex.scene.model import Scene
 
-__all__ = ["load_scene", "parse_override", "scene_from_dict", "validate"]
+__all__ = ["load_scene", "parse_override", "scene_from_dict", "validate", "validate_for",
+           "MAX_TWIST_PER_ELEMENT_DEG", "MIN_SECTION_RATIO"]
+
+#: largest twist between the two ends of one element (deg): a hexahedron (and an ANCF element's
+#: interpolated cross-section gradients) shrinks mid-element to cos^2(dtheta / 2) of its
+#: cross-section and degenerates at 180 deg; beyond 90 deg (half the section) it is rejected
+MAX_TWIST_PER_ELEMENT_DEG = 90.0
+#: smallest section size relative to the length: below it the section is degenerate (the mesh
+#: and the centreline probe work to 1e-9 of the length)
+MIN_SECTION_RATIO = 1e-6
+#: speed of light (m/s): no elastic wave is faster, sqrt(E / rho) included
+_LIGHT = 299792458.0
 
 _CHOICES = {
     "section.torsion": ("polar", "saint-venant"),
@@ -134,11 +147,84 @@ def validate(scene: Scene) -> Scene:
     if scene.reduction.gcms_gram_tol >= 1:
         raise SceneError("reduction.gcms_gram_tol",
                          f"must lie in (0, 1), got {scene.reduction.gcms_gram_tol!r}")
+    _check_physics(scene)
     if scene.rotation.profile == "spin-up" and not scene.rotation.spinup_time > 0:
         raise SceneError("rotation.spinup_time",
                          "must be > 0 with rotation.profile = \"spin-up\", got "
                          f"{scene.rotation.spinup_time!r}")
     return scene
+
+
+def _check_physics(scene: Scene) -> None:
+    """Reject scenes no elastic body can be: degenerate sections, wave speeds above light's, and
+    loads or speeds that strain the beam by 100 % or more (bounds below the true stress, so only
+    what is meaningless for every model here is rejected)."""
+    g, mat = scene.geometry, scene.material
+    for key in ("root_y", "root_z", "tip_y", "tip_z"):
+        size = getattr(g, key)
+        if size < MIN_SECTION_RATIO * g.length:
+            raise SceneError(f"geometry.{key}", f"{size!r} m is below {MIN_SECTION_RATIO:g} of the "
+                                                f"length ({g.length!r} m): a degenerate section")
+    wave = math.sqrt(mat.E / mat.rho)
+    if not wave < _LIGHT:
+        raise SceneError("material.E", f"with material.rho = {mat.rho!r} the wave speed "
+                                       f"sqrt(E/rho) = {wave:.3g} m/s exceeds the speed of light")
+    # centrifugal stress at the root of a uniform bar: rho Omega^2 ((R+L)^2 - R^2) / 2
+    R, L = g.hub_radius, g.length
+    arm2 = (R + L) ** 2 - R**2
+    try:
+        strain = mat.rho * scene.rotation.omega**2 * arm2 / (2.0 * mat.E)
+    except OverflowError:
+        strain = math.inf
+    if not strain < 1.0:
+        limit = math.sqrt(2.0 * mat.E / (mat.rho * arm2)) * 60 / (2 * math.pi)
+        raise SceneError("rotation.rpm", f"{scene.rotation.rpm!r} rpm strains the beam by "
+                                         f"{strain:.3g} (centrifugal stress / E >= 1 with "
+                                         f"material.E = {mat.E!r}, rho = {mat.rho!r}): "
+                                         f"meaningless for an elastic body; allowed: below "
+                                         f"{limit:.4g} rpm for this scene")
+    # bending at each station under the line load and the tip force, on the stiffer axis of the
+    # section (a lower bound of the stress)
+    x = np.linspace(0.0, L, 101)
+    s = x / L
+    b, h = g.root_y + (g.tip_y - g.root_y) * s, g.root_z + (g.tip_z - g.root_z) * s
+    W = np.maximum(b * h * h, h * b * b) / 6.0
+    Fx, Fy, Fz = scene.load.tip_force
+    moment = abs(scene.load.line_load) * (L - x) ** 2 / 2.0 + math.hypot(Fy, Fz) * (L - x)
+    strain = float(np.max((moment / W + abs(Fx) / (b * h)) / mat.E))
+    if not strain < 1.0:
+        key = "load.line_load" if scene.load.line_load else "load.tip_force"
+        raise SceneError(key, f"strains the beam by {strain:.3g} in bending (stress / E >= 1 "
+                              f"with material.E = {mat.E!r}): meaningless for an elastic body")
+
+
+def _twist_per_element(scene: Scene, key: str, count: int, what: str) -> None:
+    """Reject a twist of more than MAX_TWIST_PER_ELEMENT_DEG between an element's two ends."""
+    twist = scene.geometry.twist_deg
+    per = abs(twist) / count
+    if per > MAX_TWIST_PER_ELEMENT_DEG:
+        need = math.ceil(abs(twist) / MAX_TWIST_PER_ELEMENT_DEG)
+        raise SceneError(key, f"{count} {what} twist by {per:g} deg each (geometry.twist_deg = "
+                              f"{twist!r}), which nearly or fully degenerates their cross-"
+                              f"section; allowed: at least {need} {what}")
+
+
+def validate_for(method: str, scene: Scene) -> None:
+    """What only ``method`` needs of the scene: a mesh whose elements do not degenerate and a
+    modal basis no larger than the mesh."""
+    if method in ("ffrf", "gcms", "tlf"):
+        nx, ny, nz = scene.mesh.solid
+        _twist_per_element(scene, "mesh.solid", nx, "divisions along X")
+        dof = 3 * nx * (ny + 1) * (nz + 1)
+        modes = {"ffrf": scene.reduction.ffrf_modes, "gcms": scene.reduction.gcms_modes // 3}
+        if method in modes and modes[method] > dof:
+            key = "reduction.ffrf_modes" if method == "ffrf" else "reduction.gcms_modes"
+            raise SceneError(key, f"needs {modes[method]} clamped modes but mesh.solid "
+                                  f"{list(scene.mesh.solid)} has {dof} unknowns; allowed: at "
+                                  f"most {dof if method == 'ffrf' else 3 * dof}")
+    if method == "ancf":
+        _twist_per_element(scene, "mesh.beam_elements", scene.mesh.beam_elements,
+                           "ANCF elements")
 
 
 def load_scene(path: str | os.PathLike | None = None, overrides: Iterable[str] = (),

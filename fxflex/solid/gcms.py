@@ -271,6 +271,14 @@ class GCMS(ReducedFormulation):
         """U_tip = A^T u_f,tip: the rigid rotation removed (SPEC section 2)."""
         return rotation_z(self.drive.angle(t)).T @ (self.gm.tip @ q)
 
+    def rotating_state(self, t: float, q: np.ndarray, v: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """(zeta, zeta') of the rotating frame (module docstring): xi = R zeta with R' = phi' J R,
+        so zeta = R^T xi and zeta' = R^T (xi' - phi' J xi)."""
+        phi, w, _ = self.drive.state(t)
+        RT = self.rotation(phi).T
+        return RT @ q, RT @ (v - w * (self.gm.J @ q))
+
     def rotating_coordinates(self, t: float, q: np.ndarray) -> np.ndarray:
         """zeta = R(phi)^T xi: U = A^T u_f = Psi~ R^T xi, since A_d Psi~ = Psi~ R."""
         return self.rotation(self.drive.angle(t)).T @ q

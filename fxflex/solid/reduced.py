@@ -299,6 +299,12 @@ class ReducedFormulation(DenseStability):
             K = K + self.c_rho * w * r.G
         return eye, C, K
 
+    def rotating_state(self, t: float, q: np.ndarray, v: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """(z, z') in the coordinates of :meth:`linearise` (FFRF: its own, relative to the
+        rotating frame already)."""
+        return q, v
+
     def mode_tip(self, X: np.ndarray) -> np.ndarray:
         """(6, k) tip translation and rotation (O-XYZ) of rotating-frame mode vectors X (k, ...)
         in the coordinates z of :class:`RotatingSystem`."""

@@ -176,6 +176,9 @@ class TLF:
     """
 
     method = "tlf"
+    #: geometrically exact (Green-Lagrange strain): a run stops only beyond 2 L of deflection
+    #: (fxflex.time.driver.divergence_limit)
+    deflection_range = 2.0
 
     def __init__(self, scene: Scene, comm, options: BuildOptions, *, hub_frame: bool = True):
         t0 = time.perf_counter()
@@ -309,6 +312,11 @@ class TLF:
     def tip(self, t: float, q: np.ndarray) -> np.ndarray:
         """Free-end deflection in O-XYZ, U = A^T (x0 + u) - x0 of the tip centre (SPEC 2)."""
         return self.model.tip_relative(q, self.drive.angle(t))
+
+    def state_points(self) -> np.ndarray:
+        """Undeformed coordinates of the owned nodes, in state order (three entries per node):
+        how a checkpoint orders the distributed state independently of the partition."""
+        return self.model.node_coordinates()
 
     def omega_max(self) -> float:
         """Highest circular frequency of the clamped body, sqrt of the largest eigenvalue of

@@ -1,11 +1,21 @@
-"""Why did a run diverge? Physical instability or a step too large (SPEC section 4).
+"""Why did a run stop? Physical instability, a step too large, or a response out of range
+(SPEC section 4).
 
-A divergence is *physical* when the linearised rotating system has an eigenvalue with positive
-real part (SPEC section 6); otherwise it is *numerical*: for CD the step exceeds 2 / w_max, for
-AB2 the undamped modes grow like exp(w^4 h^3 t / 4) (NOTES.md); generalised-alpha has no step
-limit on linear systems and fails only through Newton's method (``NewtonFailure``). Formulations
-that can answer offer ``growth_rate()`` -> (Re lambda_max, |Im lambda| of that root) and
-``omega_max()`` -> the highest circular frequency of the discrete system.
+1. *physical* instability: the linearised rotating system about a converged steady state has an
+   eigenvalue with positive real part (SPEC section 6) beyond the eigensolver's round-off: the
+   formulation's own ``stable()`` is False; ``growth_rate()`` gives (Re lambda_max, |Im lambda|
+   of that root).
+2. *numerical*: the scheme amplifies the highest mode (w_max, damping c/rho; see
+   :func:`fxflex.time.stability.top_mode`) at this step - central difference beyond its limit,
+   AB2 by more than exp(``AB2_LOG_GROWTH``) by the time of the stop (its exact root) - or
+   generalised-alpha's Newton iteration failed for good (it has no step limit on linear
+   systems). When an unstable eigenvalue is there too, the faster growth is named.
+3. otherwise the response itself left the model's range (a large but bounded physical
+   response: the deflection limit of :func:`fxflex.time.driver.divergence_limit`), reported as
+   *physical* with that explanation; a NaN without either cause is reported as numerical.
+
+Every diagnosis also carries the growth rate measured from the deflections before the stop,
+when they grew exponentially, to compare with the eigenvalue or the scheme's root.
 """
 
 from __future__ import annotations
@@ -14,12 +24,52 @@ import math
 
 import numpy as np
 
-__all__ = ["diagnose", "ab2_growth_exponent", "deviation_growth"]
+from fxflex.time import stability
+from fxflex.time.driver import SMALL_DEFORMATION_RANGE
+
+__all__ = ["diagnose", "ab2_growth_exponent", "measured_growth_rate", "deviation_growth",
+           "ab2_warning", "AB2_LOG_GROWTH"]
+
+#: AB2 counts as the cause when it amplifies the highest mode by more than exp(10) = 2.2e4 by the
+#: time of the stop: a mode excited at 1e-4 of the deflection limit or less reaches it
+AB2_LOG_GROWTH = 10.0
 
 
 def ab2_growth_exponent(omega: float, h: float, t: float) -> float:
     """ln of the AB2 amplification of an undamped mode omega after time t: w^4 h^3 t / 4."""
     return omega**4 * h**3 * t / 4.0
+
+
+def measured_growth_rate(growth: np.ndarray | None, decades: float = 4.0) -> float | None:
+    """Exponential growth rate (1/s) of the deflection magnitudes (t, |U|) before a stop: the
+    least-squares slope of ln |U| over the last ``decades`` decades of growth, or None when those
+    points are too few or do not lie on an exponential (R^2 < 0.9, or the slopes of the two
+    halves differ by more than 30 %, as they do for a power law such as a load's t^2 start)."""
+    if growth is None or len(growth) < 8:
+        return None
+    t, amp = growth[:, 0], growth[:, 1]
+    ok = amp > 0
+    if ok.sum() < 8:
+        return None
+    t, amp = t[ok], amp[ok]
+    # the last stretch that stays within `decades` of the final value
+    low = amp[-1] * 10.0**-decades
+    start = len(amp) - 1
+    while start > 0 and amp[start - 1] >= low:
+        start -= 1
+    t, y = t[start:], np.log(amp[start:])
+    if len(t) < 8 or t[-1] - t[0] <= 0:
+        return None
+    slope, icpt = np.polyfit(t, y, 1)
+    resid = y - (slope * t + icpt)
+    spread = np.sum((y - y.mean()) ** 2)
+    if spread <= 0 or 1.0 - np.sum(resid**2) / spread < 0.9 or slope <= 0:
+        return None
+    half = len(t) // 2
+    first, second = np.polyfit(t[:half], y[:half], 1)[0], np.polyfit(t[half:], y[half:], 1)[0]
+    if abs(first - second) > 0.3 * slope:
+        return None
+    return float(slope)
 
 
 def deviation_growth(history, steady_tip, threshold: float = 100.0) -> tuple[float | None, int]:
@@ -35,35 +85,118 @@ def deviation_growth(history, steady_tip, threshold: float = 100.0) -> tuple[flo
     return float(np.polyfit(h[late, 0], np.log(dev[late]), 1)[0]), int(late.sum())
 
 
-def diagnose(form, integrator: str, dt: float, result) -> dict:
-    """{"time_s", "cause", "detail"} for a run that stopped on divergence."""
-    out = {"time_s": result.diverged["time_s"], "cause": None,
-           "detail": result.diverged["reason"]}
-    growth = getattr(form, "growth_rate", None)
-    if callable(growth):
-        rate, freq = growth()
-        if rate > 0:
-            out["cause"] = "physical"
-            out["detail"] += (f"; the linearised rotating system has an eigenvalue with real part "
-                              f"{rate:.4g} 1/s (frequency {freq / (2 * math.pi):.4g} Hz)")
-            out["growth_rate"] = rate
-            return out
+def ab2_warning(form, dt: float, t: float) -> str | None:
+    """For an AB2 run that reached t without stopping: a warning when AB2 amplified the highest
+    mode by more than exp(AB2_LOG_GROWTH) (exact root, w_max from ``omega_max()``): its output
+    may then carry a spurious high-frequency part too small to stop the run (docs/reduced.md:
+    GCMS at 0.5 us is 20x off after 10 ms without diverging). None otherwise."""
     wmax_fn = getattr(form, "omega_max", None)
-    wmax = wmax_fn() if callable(wmax_fn) else None
-    out["cause"] = "numerical"
-    if wmax is not None and integrator == "cd":
-        out["detail"] += (f"; central difference needs dt < 2/w_max = {2 / wmax:.4g} s "
-                          f"(w_max = {wmax:.4g} rad/s), dt = {dt:.4g} s")
-    elif wmax is not None and integrator == "ab2":
-        expo = ab2_growth_exponent(wmax, dt, out["time_s"])
-        out["detail"] += (f"; AB2 amplifies the highest mode (w_max = {wmax:.4g} rad/s) by "
-                          f"exp(w^4 h^3 t / 4) = exp({expo:.3g}) by this time; reduce dt")
-    elif integrator == "generalized-alpha":
-        out["detail"] += ("; generalized-alpha is unconditionally stable on linear systems, so "
-                          "the step only limits Newton's convergence: reduce dt")
-    elif growth is None:
+    if not callable(wmax_fn):
+        return None
+    w = float(wmax_fn())
+    d = form.scene.damping.c / form.scene.material.rho
+    rate = stability.growth_rate("ab2", dt, w, d)
+    if rate * t <= AB2_LOG_GROWTH:
+        return None
+    limit = stability.critical_step("ab2", w, d, window=t, log_growth=1.0)
+    return (f"AB2 amplified the highest mode (w_max = {w:.4g} rad/s) by exp({rate * t:.3g}) over "
+            f"this run: the output may carry a spurious high-frequency part; dt < {limit:.3g} s "
+            f"keeps the growth below e over {t:.3g} s")
+
+
+def _physical(form) -> tuple[float, float, bool] | None:
+    """(Re lambda_max, |Im lambda| of that root, unstable) of the linearised system about a
+    converged steady state (the verdict is the formulation's own ``stable()``, with its
+    eigensolver's round-off tolerance), or None without eigenvalue analysis or steady state."""
+    growth, stable = getattr(form, "growth_rate", None), getattr(form, "stable", None)
+    if not callable(growth):
+        return None
+    try:
+        if not form.steady_state().converged:
+            return None
+        rate, freq = growth()
+        grows = (not stable()) if callable(stable) else rate > 0.0
+    except (ValueError, np.linalg.LinAlgError, RuntimeError):
+        return None
+    return (rate, freq, bool(grows and rate > 0.0)) if math.isfinite(rate) else None
+
+
+def diagnose(form, integrator: str, dt: float, result) -> dict:
+    """{"time_s", "cause", "detail", ...} for a run that stopped early (``result.diverged``).
+
+    When both an unstable eigenvalue and the step could explain the stop, the faster growth
+    wins: a physical root growing at 56 1/s cannot blow a run up within 0.1 ms, AB2 at 1e5 1/s
+    can."""
+    stop = result.diverged
+    out = {"time_s": stop["time_s"], "cause": None, "detail": stop["reason"],
+           "stop": stop.get("kind")}       # non-finite | range | newton
+    measured = measured_growth_rate(result.growth)
+    if measured is not None:
+        out["measured_growth_rate"] = measured
+    seen = f" (measured growth of the deflection: {measured:.4g} 1/s)" if measured else ""
+    w, d = stability.top_mode(form)
+    phys = _physical(form)
+    rate = -math.inf
+    if w is not None:
+        out["omega_max"] = w
+        rate = stability.growth_rate(integrator, dt, w, d)
+        out["scheme_growth_rate"] = rate
+    modes = (f"w_max = {w:.4g} rad/s" if w is not None else "w_max unknown") + \
+        f", c/rho = {d:.4g} 1/s"
+    elapsed = stop["time_s"]
+    numerical = None
+    if stop.get("kind") == "newton":
+        numerical = ("; generalized-alpha is unconditionally stable on linear systems, so the "
+                     "step only limits Newton's convergence: reduce dt")
+    elif w is None:
+        pass
+    elif integrator == "cd":
+        limit = stability.critical_step("cd", w, d)
+        out["dt_limit_s"] = limit
+        if dt > limit:
+            numerical = (f"; central difference needs dt < {limit:.4g} s on the highest mode "
+                         f"({modes}; 2/w_max = {2 / w:.4g} s), dt = {dt:.4g} s: its root grows "
+                         f"at {rate:.4g} 1/s")
+    elif integrator == "ab2":
+        if rate * elapsed > AB2_LOG_GROWTH:
+            window = max(elapsed, dt)
+            limit = stability.critical_step("ab2", w, d, window=window)
+            out["dt_limit_s"] = limit
+            numerical = (f"; AB2 amplifies the highest mode ({modes}) at {rate:.4g} 1/s (exact "
+                         f"root; law w^4 h^3/4 - c/(2 rho) = "
+                         f"{stability.ab2_law_rate(w, dt, d):.4g} 1/s), by exp("
+                         f"{rate * elapsed:.3g}) by this time; growth below e over {window:.3g} s "
+                         f"needs dt < {limit:.3g} s")
+    if phys is not None:
+        out["growth_rate"] = phys[0]
+    if phys is not None and phys[2] and (numerical is None or phys[0] >= 0.1 * rate):
+        out["cause"] = "physical"
+        out["detail"] += (f"; the linearised rotating system has an eigenvalue with real part "
+                          f"{phys[0]:.4g} 1/s (frequency {phys[1] / (2 * math.pi):.4g} Hz)"
+                          + seen)
+        return out
+    if numerical is not None:
         out["cause"] = "numerical"
-        out["detail"] += "; no unstable eigenvalue check available for this method"
-    else:
-        out["detail"] += "; no eigenvalue of the linearised system has positive real part"
+        also = (f"; the rotating state is also unstable, but its root ({phys[0]:.4g} 1/s) grows "
+                f"far slower" if phys is not None and phys[2] else "")
+        out["detail"] += numerical + also + seen
+        return out
+    if stop.get("kind") == "non-finite":
+        out["cause"] = "numerical"
+        out["detail"] += ("; non-finite values although the step is within the integrator's "
+                          f"limit on the highest mode ({modes}) and no eigenvalue of the "
+                          "linearised system is unstable" + seen)
+        return out
+    out["cause"] = "physical"
+    eig = ("no eigenvalue of the linearised rotating system has a positive real part "
+           f"(largest {phys[0]:.3g} 1/s)" if phys is not None else
+           f"{getattr(form, 'method', 'this model')} offers no eigenvalue analysis of the "
+           "rotating state")
+    span = getattr(form, "deflection_range", SMALL_DEFORMATION_RANGE)
+    model = ("the small-deformation range of the model (the geometrically exact tlf and ancf "
+             "follow large deflections)" if span <= SMALL_DEFORMATION_RANGE else
+             "the range of the model")
+    out["detail"] += (f"; not an instability of the step ({integrator} at dt = {dt:.4g} s is "
+                      f"within its limit on the highest mode, {modes}) and {eig}: the response "
+                      f"itself left {model}" + seen)
     return out

@@ -1,9 +1,25 @@
 """One time loop for every formulation and integrator.
 
 The loop samples the free-end deflection (and any extra outputs the formulation offers, e.g. the
-drive torque), hands each sample to a callback (the CSV writer), shows progress and stops early
-when the response diverges: a non-finite value or a deflection beyond ``limit``, or an implicit
-step whose Newton iteration fails for good (:class:`~fxflex.time.implicit.NewtonFailure`).
+drive torque), hands each sample to a callback (the CSV writer), shows progress, writes
+checkpoints, and stops early when the run diverges. Divergence is checked every
+``min(sample_every, 100)`` steps and at every sample:
+
+- a NaN or inf anywhere in the state (q and v, through their global sum of squares, which is also
+  where an overflow shows first), in the deflection or in an extra output;
+- a deflection beyond the method's range, ``divergence_limit``: a quarter of the length for the
+  small-deformation models, twice the length for the geometrically exact ones;
+- an implicit step whose Newton iteration fails for good
+  (:class:`~fxflex.time.implicit.NewtonFailure`): the run ends at the last converged state.
+
+A sample is written only once it has passed these checks, so no output ever holds a NaN; the
+result then carries the last finite deflection. The deflection magnitude at the last
+``GROWTH_POINTS`` checks is kept (in a preallocated ring) so that the diagnosis can measure the
+growth rate of a divergence.
+
+Resuming: ``resume`` restarts the loop at step ``Resume.step`` from the state and the scheme's
+history that ``on_checkpoint`` was given at that step. Times are ``t0 + k dt`` with the global
+step index k in both runs, so a resumed run takes bit for bit the steps of an uninterrupted one.
 """
 
 from __future__ import annotations
@@ -17,32 +33,52 @@ import numpy as np
 from fxflex.time.implicit import NewtonFailure
 from fxflex.time.schemes import make_scheme
 
-__all__ = ["RunResult", "simulate", "divergence_limit"]
+__all__ = ["RunResult", "Resume", "simulate", "divergence_limit", "GROWTH_POINTS",
+           "SMALL_DEFORMATION_RANGE"]
+
+#: deflections checked for the measured growth rate of a divergence
+GROWTH_POINTS = 512
+#: a deflection beyond this fraction of the length is outside every small-deformation model
+SMALL_DEFORMATION_RANGE = 0.25
 
 
 @dataclass
 class RunResult:
-    t: float                         # time reached (s)
-    steps: int                       # steps taken
-    tip: np.ndarray                  # deflection at t (m, O-XYZ)
-    diverged: dict | None            # None, or {"time_s", "reason"}; the cause is diagnosed later
+    t: float                         # time of ``tip`` (s): the last finite check
+    steps: int                       # steps taken (global index of the last step)
+    tip: np.ndarray                  # deflection at t (m, O-XYZ), always finite
+    diverged: dict | None            # None, or {"time_s", "reason", "kind"}; cause diagnosed later
     wall_s: float                    # wall time of the loop
-    samples: int = 0
-    history: list = field(default_factory=list)   # (t, tip...) rows when keep_history
+    samples: int = 0                 # samples handed to on_sample, counting those before a resume
+    history: list = field(default_factory=list)   # (t, tip..., extras...) rows when keep_history
+    growth: np.ndarray | None = None  # (m, 2) rows (t, max |tip|) of the last checks, oldest first
     stats: dict = field(default_factory=dict)     # the scheme's counters (implicit: Newton)
 
 
+@dataclass
+class Resume:
+    """Where a checkpointed run continues: the global step and the scheme's history arrays at
+    it (``state_arrays()``), and how many samples were written up to it."""
+
+    step: int
+    arrays: dict
+    samples: int
+
+
 def divergence_limit(form) -> float:
-    """Deflection beyond which a run counts as divergent: a quarter of the beam length, far past
-    the small-deformation range of every formulation here."""
-    return 0.25 * form.scene.geometry.length
+    """Deflection beyond which a run stops (m): ``form.deflection_range`` (default 0.25) times the
+    beam length. A quarter of the length is far past the range of the linear and von Karman
+    models; the geometrically exact ones (TLF, ANCF) set 2: the tip of an inextensible beam stays
+    within 2 L of its rigidly rotated position, so beyond it only a run out of control goes."""
+    return getattr(form, "deflection_range", SMALL_DEFORMATION_RANGE) * form.scene.geometry.length
 
 
 def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: int = 1,
              on_sample=None, progress=None, limit: float | None = None, keep_history=False,
              t0: float = 0.0, state: tuple[np.ndarray, np.ndarray] | None = None,
              extras: bool = True, rho_inf: float | None = None,
-             scheme_options: dict | None = None) -> RunResult:
+             scheme_options: dict | None = None, checkpoint_every: int = 0, on_checkpoint=None,
+             resume: Resume | None = None) -> RunResult:
     """Integrate ``form`` from t0 to t_end with step dt.
 
     on_sample(t, tip, extras, q) is called at step 0, every ``sample_every`` steps and at the end
@@ -50,79 +86,122 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
     drive torque, which costs an acceleration evaluation) are computed only when someone reads
     them: ``extras`` is true and there is an ``on_sample`` or a history; else the callback gets ().
     ``rho_inf`` and ``scheme_options`` (tol, max_iter, max_halvings) configure
-    ``generalized-alpha``.
+    ``generalized-alpha``. on_checkpoint(step, q, v, arrays, samples) is called every
+    ``checkpoint_every`` steps (not at the last), after that step's sample. With ``resume`` the
+    loop continues after step ``resume.step`` from ``state``.
     """
     if dt <= 0 or not math.isfinite(dt):
         raise ValueError("dt must be positive")
-    limit = divergence_limit(form) if limit is None else limit
+    where = ""
+    if limit is None:
+        limit = divergence_limit(form)
+        where = f" ({limit / form.scene.geometry.length:g} of the length)"
     nsteps = max(int(round((t_end - t0) / dt)), 1)
     q, v = form.initial_state() if state is None else state
     wanted = extras and (on_sample is not None or keep_history)
     extras = getattr(form, "extras", None) if wanted else None
+    comm = getattr(form, "comm", None)
+    distributed = comm is not None and comm.size > 1
     history = []
+    ring = np.zeros((GROWTH_POINTS, 2))
+    last_tip = np.zeros(3)
+    counters = {"checks": 0, "samples": 0 if resume is None else resume.samples}
+    last = {"t": t0}
+    diverged = None
 
-    def sample(k: int, t: float | None = None) -> np.ndarray:
+    def check(k: int, sample_now: bool, t: float | None = None) -> dict | None:
+        """Check the state at step k (or time t) and write its sample; the reason if it
+        diverged."""
         t = t0 + k * dt if t is None else t
+        norm2 = float(np.dot(q, q) + np.dot(v, v))
+        if distributed:
+            norm2 = comm.allreduce(norm2)
+        if not math.isfinite(norm2):
+            return {"time_s": t, "kind": "non-finite",
+                    "reason": "NaN or inf in the state (or a state beyond 1e154)"}
         tip = form.tip(t, q)
-        ex = extras(t, q, v) if extras is not None else ()
-        if keep_history:
-            history.append((t, *tip, *ex))
-        if on_sample is not None:
-            on_sample(t, tip, ex, q)
-        return tip
+        if not np.all(np.isfinite(tip)):
+            return {"time_s": t, "kind": "non-finite", "reason": "non-finite deflection"}
+        amp = float(np.max(np.abs(tip)))
+        ring[counters["checks"] % GROWTH_POINTS] = t, amp
+        counters["checks"] += 1
+        out = None
+        if amp > limit:
+            out = {"time_s": t, "kind": "range",
+                   "reason": f"deflection {amp:.4g} m beyond the limit {limit:.4g} m{where}"}
+            sample_now = True
+        if sample_now:
+            ex = extras(t, q, v) if extras is not None else ()
+            if not all(math.isfinite(x) for x in ex):
+                return {"time_s": t, "kind": "non-finite", "reason": "non-finite extra output"}
+            if keep_history:
+                history.append((t, *tip, *ex))
+            if on_sample is not None:
+                on_sample(t, tip, ex, q)
+            counters["samples"] += 1
+        last_tip[:] = tip
+        last["t"] = t
+        return out
 
-    check_every = max(1, min(sample_every, 100))
     options = dict(scheme_options or {})
     if rho_inf is not None:
         options["rho_inf"] = rho_inf
     scheme = make_scheme(integrator, **options)
     wall0 = time.perf_counter()
-    diverged = None
-    tip = sample(0)
-    nsamples = 1
-    k = 1
-    try:
-        scheme.start(form, t0, dt, q, v)
-    except NewtonFailure as exc:
-        return _failed(exc, form, sample, scheme, 0, wall0, nsamples, history)
-    while True:
-        last = k == nsteps
-        sample_now = last or k % sample_every == 0
-        if sample_now or k % check_every == 0:
-            if sample_now:
-                tip = sample(k)
-                nsamples += 1
-            else:
-                tip = form.tip(t0 + k * dt, q)
-            if not np.all(np.isfinite(tip)) or np.max(np.abs(tip)) > limit:
-                if not sample_now:
-                    tip = sample(k)
-                    nsamples += 1
-                reason = ("non-finite deflection" if not np.all(np.isfinite(tip)) else
-                          f"deflection {np.max(np.abs(tip)):.3g} m beyond {limit:.3g} m")
-                diverged = {"time_s": t0 + k * dt, "reason": reason}
+    # a run that blows up overflows between two checks; the check reports it, numpy need not
+    with np.errstate(over="ignore", invalid="ignore"):
+        if resume is None:
+            k = 0
+            diverged = check(0, True)
+            if diverged is None:
+                try:
+                    scheme.start(form, t0, dt, q, v)
+                except NewtonFailure as exc:
+                    diverged = _newton_stop(exc, check, last, k)
+                k = 1
+            fresh = True
+        else:
+            k = resume.step
+            last["t"] = t0 + k * dt
+            last_tip[:] = form.tip(last["t"], q)
+            scheme.resume(form, t0 + k * dt, dt, q, v, resume.arrays)
+            fresh = False                 # step k was checked and sampled before the checkpoint
+        check_every = max(1, min(sample_every, 100))
+        while diverged is None:
+            final = k >= nsteps
+            if fresh:
+                sample_now = final or k % sample_every == 0
+                if sample_now or k % check_every == 0:
+                    diverged = check(k, sample_now)
+                    if diverged is not None:
+                        break
+                    if progress is not None:
+                        progress.update(k, f"t={t0 + k * dt:.4g} s")
+                if (checkpoint_every and on_checkpoint is not None and not final
+                        and k % checkpoint_every == 0):
+                    on_checkpoint(k, q, v, scheme.state_arrays(), counters["samples"])
+            fresh = True
+            if final:
                 break
-            if progress is not None:
-                progress.update(k, f"t={t0 + k * dt:.4g} s")
-        if last:
-            break
-        try:
-            scheme.step(form, t0 + k * dt, dt, q, v)
-        except NewtonFailure as exc:
-            return _failed(exc, form, sample, scheme, k, wall0, nsamples, history)
-        k += 1
+            try:
+                scheme.step(form, t0 + k * dt, dt, q, v)
+            except NewtonFailure as exc:
+                diverged = _newton_stop(exc, check, last, k)
+                break
+            k += 1
     wall = time.perf_counter() - wall0
-    return RunResult(t=t0 + k * dt, steps=k, tip=np.asarray(tip, dtype=float), diverged=diverged,
-                     wall_s=wall, samples=nsamples, history=history,
+    n = min(counters["checks"], GROWTH_POINTS)
+    order = (np.arange(counters["checks"] - n, counters["checks"]) % GROWTH_POINTS)
+    return RunResult(t=last["t"], steps=k, tip=last_tip.copy(), diverged=diverged, wall_s=wall,
+                     samples=counters["samples"], history=history, growth=ring[order].copy(),
                      stats=dict(getattr(scheme, "stats", {})))
 
 
-def _failed(exc: NewtonFailure, form, sample, scheme, steps: int, wall0: float, nsamples: int,
-            history: list) -> RunResult:
-    """The run stops where an implicit step failed for good: the last converged state is sampled
-    (its time may lie between output times when the step had been cut)."""
-    tip = sample(steps, exc.reached_s)
-    return RunResult(t=exc.reached_s, steps=steps, tip=np.asarray(tip, dtype=float),
-                     diverged={"time_s": exc.time_s, "reason": str(exc)},
-                     wall_s=time.perf_counter() - wall0, samples=nsamples + 1, history=history,
-                     stats=dict(getattr(scheme, "stats", {})))
+def _newton_stop(exc: NewtonFailure, check, last: dict, k: int) -> dict:
+    """An implicit step failed for good: (q, v) hold the last converged state, at
+    ``exc.reached_s`` (between output times when the step had been cut); it is checked and
+    written unless it is the state already checked last."""
+    stop = {"time_s": exc.time_s, "kind": "newton", "reason": str(exc)}
+    if exc.reached_s > last["t"]:
+        return check(k, True, t=exc.reached_s) or stop
+    return stop

@@ -2,7 +2,9 @@
 
 Each scheme advances (q, v) in place, allocates its work arrays once in ``start`` and nothing in
 ``step``. Before every force evaluation the state is passed through ``form.constrain`` so that
-prescribed coordinates (root nodes following the drive) are exact.
+prescribed coordinates (root nodes following the drive) are exact. ``state_arrays()`` names the
+history a scheme carries between steps besides (q, v); ``resume`` rebuilds a scheme from them, so
+that a run continued from a checkpoint takes bit for bit the steps of an uninterrupted one.
 
 - ``ab2``: two-step Adams-Bashforth on the first-order form y = (q, v), y' = (v, a) (the paper's
   AB [58]); the first step is Heun's (explicit trapezoid), second order like AB2 itself. AB2 has no
@@ -64,6 +66,13 @@ class AB2:
         """History needed to resume exactly (checkpoints)."""
         return {"v_prev": self.v_prev, "a_prev": self.a_prev}
 
+    def resume(self, form, t: float, h: float, q: np.ndarray, v: np.ndarray,
+               arrays: dict[str, np.ndarray]) -> None:
+        """Continue from (q, v) at t with the history of :meth:`state_arrays`."""
+        n = q.size
+        self.a, self.w1, self.w2 = np.empty(n), np.empty(n), np.empty(n)
+        self.v_prev, self.a_prev = _copy(arrays, "v_prev", n), _copy(arrays, "a_prev", n)
+
 
 class CentralDifference:
     name = "cd"
@@ -95,7 +104,23 @@ class CentralDifference:
         self._advance(form, t, h, q, v)
 
     def state_arrays(self) -> dict[str, np.ndarray]:
+        """History needed to resume exactly: a_n and v_{n+1/2}."""
         return {"a": self.a, "v_half": self.v_half}
+
+    def resume(self, form, t: float, h: float, q: np.ndarray, v: np.ndarray,
+               arrays: dict[str, np.ndarray]) -> None:
+        """Continue from (q, v) at t with the history of :meth:`state_arrays`."""
+        n = q.size
+        self.w = np.empty(n)
+        self.a, self.v_half = _copy(arrays, "a", n), _copy(arrays, "v_half", n)
+
+
+def _copy(arrays: dict[str, np.ndarray], name: str, n: int) -> np.ndarray:
+    """A private float64 copy of a history array, checked against the state size."""
+    a = np.array(arrays[name], dtype=np.float64)
+    if a.shape != (n,):
+        raise ValueError(f"scheme history {name!r}: expected shape ({n},), got {a.shape}")
+    return a
 
 
 def _axpy(y: np.ndarray, alpha: float, x: np.ndarray, out: np.ndarray) -> None:

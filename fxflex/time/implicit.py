@@ -107,20 +107,38 @@ class GeneralizedAlpha:
     def start(self, form, t: float, h: float, q: np.ndarray, v: np.ndarray) -> None:
         """qdd_0 = a_0 = M^-1 F(t0, q0, v0) (the formulation's explicit acceleration), work
         arrays, then the first step."""
+        self._setup(form, q.size)
+        form.constrain(t, q, v)
+        form.acceleration(t, q, v, self.qdd)
+        self.a[:] = self.qdd
+        self.step(form, t, h, q, v)
+
+    def resume(self, form, t: float, h: float, q: np.ndarray, v: np.ndarray,
+               arrays: dict[str, np.ndarray]) -> None:
+        """Continue from (q, v) at t with the history of :meth:`state_arrays` (checkpoints). The
+        modified Newton's factor is not part of it: the next step makes a fresh one, so a resumed
+        run agrees with an uninterrupted one to the Newton tolerance, not bit for bit (whose
+        factor renewals follow measured timings: two uninterrupted runs can differ as much)."""
+        n = q.size
+        self._setup(form, n)
+        for name in ("qdd", "a"):
+            a = np.asarray(arrays[name], dtype=np.float64)
+            if a.shape != (n,):
+                raise ValueError(f"scheme history {name!r}: expected shape ({n},), got {a.shape}")
+            getattr(self, name)[:] = a
+
+    def _setup(self, form, n: int) -> None:
+        """Work arrays and a fresh modified-Newton state."""
         for attr in ("force", "mass_apply", "factorize"):
             if not callable(getattr(form, attr, None)):
                 raise TypeError(f"generalized-alpha: {form.method} does not offer {attr}() "
                                 f"(the Implicit interface of fxflex.formulation)")
-        n = q.size
         self.qdd, self.a = np.empty(n), np.empty(n)
         (self.abar, self.qb, self.vb, self.x, self.qn, self.vn, self.r, self.f, self.dx,
          self.w) = (np.empty(n) for _ in range(10))
         self.comm = form.comm
         self._parallel = getattr(self.comm, "size", 1) > 1
         self._red, self._red_sum = np.zeros(3), np.zeros(3)
-        form.constrain(t, q, v)
-        form.acceleration(t, q, v, self.qdd)
-        self.a[:] = self.qdd
         self.factor = None
         self._h_factor = None
         self._renew = True
@@ -130,7 +148,6 @@ class GeneralizedAlpha:
         self._fresh_iters = None       # iterations of the first step with the current factor
         self._t_factor = 0.0
         self.last_theta = 0.0
-        self.step(form, t, h, q, v)
 
     # -- one step -------------------------------------------------------------------------------
     def step(self, form, t: float, h: float, q: np.ndarray, v: np.ndarray) -> None:

@@ -71,3 +71,50 @@ def test_divergence_stops_early_with_a_reason():
 
 def test_scheme_classes_are_exported():
     assert AB2.name == "ab2" and CentralDifference.name == "cd"
+
+
+class Poisoned(Oscillator):
+    """The oscillator plus a second coordinate, unseen by the tip, that turns NaN at t = 0.5."""
+
+    def initial_state(self):
+        return np.array([self.q0, 0.0]), np.zeros(2)
+
+    def acceleration(self, t, q, v, out):
+        out[0] = -self.w**2 * q[0] - 2 * self.zeta * self.w * v[0]
+        out[1] = np.nan if t >= 0.5 else 0.0
+
+
+@pytest.mark.parametrize("scheme", ["ab2", "cd"])
+def test_nan_anywhere_in_the_state_stops_without_writing_it(scheme):
+    rows = []
+    res = simulate(Poisoned(), scheme, 1e-3, 2.0, sample_every=7,
+                   on_sample=lambda t, tip, ex, q: rows.append((t, *tip)))
+    assert res.diverged is not None and res.diverged["kind"] == "non-finite"
+    assert 0.5 <= res.diverged["time_s"] <= 0.5 + 0.1 + 1e-9     # within one check interval
+    rows = np.array(rows)
+    assert np.isfinite(rows).all() and rows[-1, 0] < res.diverged["time_s"]
+    assert np.isfinite(res.tip).all() and res.t < res.diverged["time_s"]
+
+
+@pytest.mark.parametrize("scheme", ["ab2", "cd"])
+@pytest.mark.parametrize("at", [300, 301])          # a sample step and one in between
+def test_resume_from_a_checkpoint_is_bitwise(scheme, at):
+    from fxflex.time import Resume
+
+    kept = {}
+
+    def keep(step, q, v, arrays, samples):
+        if step == at:
+            kept.update(q=q.copy(), v=v.copy(), samples=samples,
+                        arrays={k: a.copy() for k, a in arrays.items()})
+
+    rows_a, rows_b = [], []
+    full = simulate(Oscillator(), scheme, 1e-3, 1.0, sample_every=10, checkpoint_every=1,
+                    on_checkpoint=keep, on_sample=lambda t, tip, ex, q: rows_a.append((t, *tip)))
+    res = simulate(Oscillator(), scheme, 1e-3, 1.0, sample_every=10,
+                   state=(kept["q"], kept["v"]),
+                   resume=Resume(step=at, arrays=kept["arrays"], samples=kept["samples"]),
+                   on_sample=lambda t, tip, ex, q: rows_b.append((t, *tip)))
+    assert res.steps == full.steps == 1000 and res.diverged is None
+    assert rows_a[-len(rows_b):] == rows_b and len(rows_a) == kept["samples"] + len(rows_b)
+    assert res.samples == full.samples and np.array_equal(res.tip, full.tip)
