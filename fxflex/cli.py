@@ -187,8 +187,8 @@ def make_parser() -> argparse.ArgumentParser:
                    help="smaller meshes and fewer repeats (a smoke run, not the reported figures)")
     p.add_argument("--reference", action="store_true",
                    help="accuracy only: recompute the converged reference (refined Q1 and Q2 "
-                        "meshes, Richardson extrapolation; about an hour) and store it, instead "
-                        "of the work-precision study")
+                        "meshes, Richardson extrapolation; about 25 minutes) and store it, "
+                        "instead of the work-precision study")
     _common(p)
     return parser
 

@@ -30,7 +30,7 @@ Two errors, two plots, one table each:
 
 Pareto fronts (no other point both cheaper and more accurate) are named per method in (a), per
 method and over all methods (against the nonlinear truth) in (b); the paper's settings are marked.
-``reference=True`` (``--reference``) recomputes the converged reference instead (about an hour
+``reference=True`` (``--reference``) recomputes the converged reference instead (about 25 minutes
 on 2 cores) and stores it in ``fxflex/data/reference.json`` (default scene; ``quick``: coarse
 levels, not stored). Writes ``accuracy.md``, ``accuracy.json``, ``accuracy_history.png`` and
 ``accuracy_convergent.png`` (``reference.md``, ``reference.json``, ``reference.png``) to the output
@@ -647,7 +647,7 @@ def _plot_convergent(res: dict, path: str) -> None:
 # -- --reference ---------------------------------------------------------------------------------
 def _run_reference(scene: Scene, out_dir: str, comm, quick: bool, info: dict, log) -> dict:
     log("converged reference: " + ("quick levels" if quick else "Q2 m = 3, 4, 6, 8 and Q1 m = 4, "
-                                   "6, 8, 12 at 1000, 5000, 10000 rpm (about an hour)"))
+                                   "6, 8, 12 at 1000, 5000, 10000 rpm (about 25 minutes)"))
     ref = refmod.converged_reference(scene, comm, quick=quick, log=log)
     ref["command"] = "fxflex bench accuracy --reference" + (" --quick" if quick else "")
     ref["scene"] = scene.to_dict()
