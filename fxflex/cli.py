@@ -185,6 +185,10 @@ def make_parser() -> argparse.ArgumentParser:
                    help="output folder (default out/bench)")
     p.add_argument("--quick", action="store_true",
                    help="smaller meshes and fewer repeats (a smoke run, not the reported figures)")
+    p.add_argument("--reference", action="store_true",
+                   help="accuracy only: recompute the converged reference (refined Q1 and Q2 "
+                        "meshes, Richardson extrapolation; about 25 minutes) and store it, "
+                        "instead of the work-precision study")
     _common(p)
     return parser
 
@@ -477,6 +481,12 @@ def cmd_bench(args, comm) -> None:
     from fxflex.io import envelope
 
     scene = _scene_from_args(args)
+    options = {}
+    if args.reference:
+        if args.name != "accuracy":
+            raise FxflexError(f"--reference: not an option of bench {args.name}; it applies to "
+                              f"accuracy")
+        options["reference"] = True
     try:
         module = importlib.import_module(f"fxflex.bench.{args.name}")
     except ModuleNotFoundError as exc:
@@ -487,7 +497,7 @@ def cmd_bench(args, comm) -> None:
     if comm.rank == 0:
         os.makedirs(out_dir, exist_ok=True)
     comm.Barrier()
-    result = module.run(scene, out_dir, comm, quick=args.quick)
+    result = module.run(scene, out_dir, comm, quick=args.quick, **options)
     payload = envelope(scene, bench=args.name, out_dir=out_dir, **result)
     _emit(comm, args, payload, result.get("summary", f"bench {args.name}: see {out_dir}"))
 

@@ -7,6 +7,11 @@ and the volume error falls at second order). The result is cached as ``.msh`` in
 keyed by the geometry, the divisions and the ``.geo`` text, and regenerated when any changes
 (never read or written with ``FXFLEX_NO_CACHE=1``, see :mod:`fxflex.cache`).
 Facet tags: ``ROOT`` (x = 0, clamped) and ``TIP`` (x = L).
+
+``order=2`` makes 27-node hexahedra (gmsh ``setOrder(2)``) whose edge, face and cell midpoints are
+mapped onto the body as well: the geometry is then the quadratic interpolant of the exact twisted
+shape (isoparametric for Q2 displacements, :mod:`fxflex.analysis.reference`), its volume error
+falling at fourth order instead of second.
 """
 
 from __future__ import annotations
@@ -37,28 +42,35 @@ class SolidMesh:
     facet_tags: object
     shape: BeamShape
     divisions: tuple[int, int, int]
+    order: int              # geometry degree: 1 (8-node hexahedra) or 2 (27-node)
     path: Path | None       # the cached .msh file
     generated: bool         # False when read from the cache
 
 
-def mesh_key(geometry: Geometry, divisions) -> str:
-    """Hash of what the mesh depends on: geometry, divisions, the ``.geo`` text and the source
-    of this module and of the shape map (snapping every node onto the grid makes the node
-    positions independent of the gmsh version)."""
-    text = json.dumps({"geometry": asdict(geometry), "divisions": list(divisions),
-                       "geo": GEO_FILE.read_text(),
-                       "code": cache.code_version(__name__, "fxflex.mesh.geometry")},
-                      sort_keys=True)
+def mesh_key(geometry: Geometry, divisions, order: int = 1) -> str:
+    """Hash of what the mesh depends on: geometry, divisions, geometry order, the ``.geo`` text
+    and the source of this module and of the shape map (snapping every node onto the grid makes
+    the node positions independent of the gmsh version)."""
+    what = {"geometry": asdict(geometry), "divisions": list(divisions),
+            "geo": GEO_FILE.read_text(),
+            "code": cache.code_version(__name__, "fxflex.mesh.geometry")}
+    if order != 1:
+        what["order"] = order
+    text = json.dumps(what, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def _generate(gmsh, shape: BeamShape, divisions) -> None:
+def _generate(gmsh, shape: BeamShape, divisions, order: int = 1) -> None:
     """Mesh the unit block from the .geo file and move every node onto the body."""
-    nx, ny, nz = divisions
     for name, value in zip(("nx", "ny", "nz"), divisions):
         gmsh.onelab.setNumber(name, [float(value)])
     gmsh.open(str(GEO_FILE))
     gmsh.model.mesh.generate(3)
+    if order != 1:
+        gmsh.option.setNumber("Mesh.SecondOrderIncomplete", 0)      # 27 nodes, not 20
+        gmsh.model.mesh.setOrder(order)
+    # the nodes of an order-k mesh of the unit block lie on a grid k times finer
+    nx, ny, nz = (order * n for n in divisions)
     tags, coords, _ = gmsh.model.mesh.getNodes()
     ref = coords.reshape(-1, 3)
     # snap to the exact structured grid: the centerline (eta = zeta = 0) lands exactly on the axis
@@ -70,16 +82,19 @@ def _generate(gmsh, shape: BeamShape, divisions) -> None:
         gmsh.model.mesh.setNode(int(tag), [x, y, z], [])
 
 
-def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = True
-                     ) -> SolidMesh:
-    """The distributed dolfinx mesh of the beam for ``divisions = (nx, ny, nz)``."""
+def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = True,
+                     order: int = 1) -> SolidMesh:
+    """The distributed dolfinx mesh of the beam for ``divisions = (nx, ny, nz)``, with
+    ``order`` 1 (trilinear) or 2 (triquadratic, 27-node) cell geometry."""
+    if order not in (1, 2):
+        raise ValueError(f"mesh order must be 1 or 2, not {order}")
     import gmsh
     from dolfinx.io import gmshio
 
     divisions = tuple(int(n) for n in divisions)
     shape = BeamShape(geometry)
     use_cache = use_cache and cache.enabled("meshes")
-    path = cache.cache_root() / "meshes" / f"beam-{mesh_key(geometry, divisions)}.msh"
+    path = cache.cache_root() / "meshes" / f"beam-{mesh_key(geometry, divisions, order)}.msh"
     generated = False
     gmsh.initialize(readConfigFiles=False)
     gmsh.option.setNumber("General.Terminal", 0)
@@ -89,7 +104,7 @@ def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = T
             if use_cache and path.exists():
                 gmsh.open(str(path))
             else:
-                _generate(gmsh, shape, divisions)
+                _generate(gmsh, shape, divisions, order)
                 generated = True
                 # distribute what a later run reads from the file (the node and cell order of a
                 # freshly generated model differ from the file's, and with them the MPI
@@ -119,4 +134,4 @@ def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = T
         gmsh.finalize()
     generated, use_cache = comm.bcast((generated, use_cache), root=0)
     return SolidMesh(mesh=mesh, cell_tags=cell_tags, facet_tags=facet_tags, shape=shape,
-                     divisions=divisions, path=path if use_cache else None, generated=generated)
+                     divisions=divisions, order=order, path=path if use_cache else None, generated=generated)

@@ -2,6 +2,8 @@
 
 Q1 hexahedra (paper Eq. 8) on the gmsh mesh, the root face clamped, quadrature degree set
 explicitly (2 = 2x2x2 Gauss, exact for the linear part on affine cells; the paper used 3x3x3).
+``degree=2`` gives isoparametric Q2 hexahedra (27-node geometry, 3x3x3 Gauss by default): only the
+converged reference of :mod:`fxflex.analysis.reference` uses them.
 Builds the loads of SPEC section 1 -- consistent nodal forces of the centerline line load and the
 tip force as a uniform traction over the tip face -- and the tip probe (the tip section centre is a
 mesh node that lives on one rank; its displacement is shared with allreduce).
@@ -33,18 +35,21 @@ def solid_dof_count(scene: Scene) -> int:
 class SolidModel:
     """Mesh, function space, clamp, loads and tip probe of the solid beam."""
 
-    def __init__(self, scene: Scene, comm, *, divisions=None, quadrature_degree: int = 2):
+    def __init__(self, scene: Scene, comm, *, divisions=None, quadrature_degree: int | None = None,
+                 degree: int = 1):
         t0 = time.perf_counter()
         self.scene, self.comm = scene, comm
         self.divisions = tuple(divisions or scene.mesh.solid)
-        sm = build_solid_mesh(scene.geometry, self.divisions, comm)
+        self.degree = degree
+        quadrature_degree = 2 * degree if quadrature_degree is None else quadrature_degree
+        sm = build_solid_mesh(scene.geometry, self.divisions, comm, order=degree)
         self.solid_mesh, self.mesh, self.shape = sm, sm.mesh, sm.shape
         self.timings = {"mesh": time.perf_counter() - t0}
         self.quadrature_degree = quadrature_degree
         md = {"quadrature_degree": quadrature_degree}
         self.dx = ufl.dx(domain=self.mesh, metadata=md)
         self.ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=sm.facet_tags, metadata=md)
-        self.V = fem.VectorFunctionSpace(self.mesh, ("Lagrange", 1))
+        self.V = fem.VectorFunctionSpace(self.mesh, ("Lagrange", degree))
         imap = self.V.dofmap.index_map
         self.n_owned_nodes = imap.size_local
         self.n_owned = 3 * imap.size_local          # length of a state array on this rank
@@ -79,8 +84,9 @@ class SolidModel:
         self.tip_node = int(tip[0]) if tip.size else None
         self.x0_tip = np.array([g.hub_radius + g.length, 0.0, 0.0])
         count = self.comm.allreduce(nodes.size)
-        if count != self.divisions[0] + 1 or self.comm.allreduce(tip.size) != 1:
-            raise RuntimeError(f"centerline: found {count} nodes, expected {self.divisions[0] + 1}")
+        expected = self.degree * self.divisions[0] + 1
+        if count != expected or self.comm.allreduce(tip.size) != 1:
+            raise RuntimeError(f"centerline: found {count} nodes, expected {expected}")
 
     def node_coordinates(self) -> np.ndarray:
         """Undeformed coordinates X0 of the owned nodes, shape (n_owned_nodes, 3)."""
@@ -141,13 +147,22 @@ class SolidModel:
     def line_load_vector(self) -> PETSc.Vec:
         """Consistent nodal forces of the centerline line load (full magnitude, along z).
 
-        Along the centerline the Q1 shape functions restrict to linear hats, so a uniform load q
-        gives q h at interior nodes and q h / 2 at the two ends (h = L / nx).
+        Along the centerline the shape functions restrict to the 1-D Lagrange functions of the
+        element degree on each cell edge of length h = L / nx, so a uniform load q gives q times
+        their integrals, the Newton-Cotes weights: Q1 q h at interior nodes and q h / 2 at the
+        two ends; Q2 q h / 6 at each edge end (q h / 3 where two edges meet) and 2 q h / 3 at the
+        midpoint.
         """
         b = self.new_vector()
-        h = self.scene.geometry.length / self.divisions[0]
-        w = np.where((self.center_x < 0.5 * h) | (self.center_x > self.scene.geometry.length
-                                                   - 0.5 * h), 0.5 * h, h)
+        L = self.scene.geometry.length
+        h = L / self.divisions[0]
+        p = self.degree
+        weights = np.linalg.solve(np.vander(np.linspace(0.0, 1.0, p + 1), increasing=True).T,
+                                  1.0 / np.arange(1, p + 2)) * h      # int_0^h l_i
+        position = np.rint(self.center_x / h * p).astype(int)          # node index along the line
+        local = position % p
+        w = weights[local]
+        w[(local == 0) & (position > 0) & (position < p * self.divisions[0])] *= 2.0
         with b.localForm() as bl:
             bl.set(0.0)
         arr = b.getArray()

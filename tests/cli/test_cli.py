@@ -30,6 +30,7 @@ def run(*args, cwd=None):
     (["run", "--method", "nebb", "--mass", "lumped"], "--mass"),
     (["run", "--method", "tlf", "--out", "/nonexistent/dir/x.csv"], "--out"),
     (["bench", "nosuch"], "nosuch"),
+    (["bench", "steady", "--reference"], "--reference"),
     # physically meaningless scenes and degenerate meshes (issue 7)
     (["run", "--method", "lebb", "--rpm", "1e300"], "rotation.rpm"),
     (["run", "--method", "lebb", "--rpm", "70000"], "allowed: below 6.985e+04 rpm"),
