@@ -38,3 +38,14 @@ def test_long_run_energy_decays_and_ab2_grows_its_top_mode(lebb, integrator):
         assert r["top_growth_law"] < r["top_growth_root"]
     else:
         assert abs(r["top_growth_measured"]) < 1.0 and math.isfinite(r["top_growth_root"])
+
+
+def test_generalized_alpha_push_decays_on_a_nonlinear_model():
+    """NEBB at 20 / w_max: the push along the highest mode decays. Both runs solve Newton to
+    GA_TRIAL_TOL; at the default tolerance their iteration errors differ by more than the push
+    and it seemed to grow 148x."""
+    nebb = build("nebb", Scene(), MPI.COMM_SELF)
+    ga = critical_step_study(nebb, "generalized-alpha")
+    assert ga["max_radius"] <= 1.0 + 1e-12
+    assert ga["trial_step"] * ga["omega_max"] == pytest.approx(20.0, rel=1e-3)
+    assert ga["trial_growth"] < 0.1
