@@ -50,6 +50,12 @@ def run(*args, cwd=None):
     (["run", "--method", "lebb", "--resume", "nosuch.ckpt"], "file not found"),
     (["run", "--method", "tlf", "--resume", "x.ckpt", "--fields", "u.xdmf"], "--fields"),
     (["compare", "--methods", "ffrf,fem"], "fem"),
+    # modes and the Campbell diagram (issue 6)
+    (["modes", "--method", "lebb", "--campbell", "5000:1000:3"], "--campbell"),
+    (["modes", "--method", "lebb", "--campbell", "0:1000"], "--campbell"),
+    (["modes", "--method", "lebb", "--n", "0"], "--n"),
+    (["modes", "--method", "lebb", "--mass", "lumped"], "--mass"),
+    (["modes", "--method", "tlf", "--rpm", "-1"], "rotation.rpm"),
     (["run", "--method", "lebb", "--integrator", "generalized-alpha", "--rho-inf", "1.5"],
      "--rho-inf"),
     (["run", "--method", "ancf", "--rho-inf", "0.5"], "--rho-inf"),
