@@ -53,6 +53,7 @@ from fxflex.bench.common import machine, markdown_table
 from fxflex.bench.implicit import compare
 from fxflex.bench.implicit import reference as fine_reference
 from fxflex.formulation import METHODS, PAPER_INTEGRATION, build
+from fxflex.io.report import jsonable
 from fxflex.scene import PAPER_RPM, Scene
 
 __all__ = ["run", "pareto", "settling", "OWN_THEORY"]
@@ -316,17 +317,12 @@ def run(scene: Scene, out_dir: str, comm, quick: bool = False, reference: bool =
         with open(os.path.join(out_dir, "accuracy.md"), "w") as fh:
             fh.write(result["report"])
         with open(os.path.join(out_dir, "accuracy.json"), "w") as fh:
-            json.dump(_jsonable({k: v for k, v in result.items() if k != "report"}), fh,
+            json.dump(jsonable({k: v for k, v in result.items() if k != "report"}), fh,
                       indent=1)
         _plot_history(studies, os.path.join(out_dir, "accuracy_history.png"), window)
         _plot_convergent(result, os.path.join(out_dir, "accuracy_convergent.png"))
     return {"summary": result["summary"] + f"\n(tables in {out_dir}/accuracy.md)",
             "info": info, "fastest": result["fastest"], "tlf_transient": result["tlf_transient"]}
-
-
-def _jsonable(obj):
-    from fxflex.io.report import jsonable
-    return jsonable(obj)
 
 
 # -- assembling the tables -----------------------------------------------------------------------
@@ -661,7 +657,7 @@ def _run_reference(scene: Scene, out_dir: str, comm, quick: bool, info: dict, lo
     save()                                  # the expensive part is kept whatever follows
     log("discretisation errors of the paper's discretisations:")
     table = discretisation_table(scene, comm, ref, PAPER_RPM, log)
-    ref["discretisation"] = _jsonable(table)
+    ref["discretisation"] = jsonable(table)
     info["load_end"] = os.getloadavg()[0]
     report = _reference_report(ref, table, info)
     save()
