@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import math
 import os
+import stat
 import tomllib
 from collections.abc import Iterable, Mapping
+from pathlib import Path
 
 from fxflex.errors import SceneError
 from fxflex.scene.checks import MIN_SECTION_RATIO, check_keys, printable, shown
@@ -90,16 +92,34 @@ def validate_for(method: str, scene: Scene) -> None:
 
 
 def _read_toml(path: str | os.PathLike) -> dict:
-    """The TOML table of a scene file."""
+    """The TOML table of a scene file, or one line naming the file and why it cannot be one."""
+    name = os.fspath(path)
+    name = name if name.isprintable() else repr(name)
     try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            kind = "a directory" if os.path.isdir(path) else "not a regular file"
+            # a FIFO or a device would block or never end: only files are read
+            raise SceneError("--scene", f"{name} is {kind}; allowed: a TOML file")
+        raw = Path(path).read_bytes()
     except FileNotFoundError:
-        raise SceneError("--scene", f"file not found: {os.fspath(path)}") from None
-    except IsADirectoryError:
-        raise SceneError("--scene", f"is a directory, expected a TOML file: {path}") from None
+        raise SceneError("--scene", f"file not found: {name}") from None
+    except (OSError, ValueError) as exc:    # ValueError: a NUL in the path
+        reason = getattr(exc, "strerror", None) or exc
+        raise SceneError("--scene", f"cannot read {name}: {reason}") from None
+    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise SceneError("--scene", f"{name} is UTF-16 text (byte-order mark); allowed: UTF-8, "
+                                    "as TOML requires")
+    try:
+        text = raw.decode("utf-8").removeprefix("\ufeff")
+    except UnicodeDecodeError as exc:
+        raise SceneError("--scene", f"{name} is not UTF-8 text (byte 0x{raw[exc.start]:02x} at "
+                                    f"offset {exc.start}); allowed: UTF-8, as TOML requires") \
+            from None
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise SceneError("--scene", f"{os.fspath(path)} is not valid TOML ({exc})") from None
+        reason = " ".join(str(exc).split())
+        raise SceneError("--scene", f"{name} is not valid TOML ({reason})") from None
 
 
 def load_scene(path: str | os.PathLike | None = None, overrides: Iterable[str] = (),
