@@ -182,9 +182,9 @@ def _rotation(rot) -> None:
 
 def _mesh(mesh) -> None:
     if mesh.solid[1] % 2 or mesh.solid[2] % 2:
-        raise SceneError("mesh.solid", f"got {list(mesh.solid)}: Y and Z divisions must be even "
-                                       "(the centerline is a line of nodes); allowed: even Y and "
-                                       "Z divisions")
+        raise SceneError("mesh.solid", f"got {shown(list(mesh.solid))}: Y and Z divisions must be "
+                                       "even (the centerline is a line of nodes); allowed: even "
+                                       "Y and Z divisions")
 
 
 _RELATIONS = {"geometry": _geometry, "material": _material, "rotation": _rotation,
