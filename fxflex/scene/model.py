@@ -1,7 +1,10 @@
 """The scene: frozen dataclasses mirroring the TOML schema of SPEC section 8.
 
-Defaults are the paper's Sect. 4 example (SPEC section 1). Validation lives in
-:mod:`fxflex.scene.load`; these classes only hold values and derived quantities.
+Defaults are the paper's Sect. 4 example (SPEC section 1). Every class checks itself on
+construction through :mod:`fxflex.scene.checks` (the one place of validation), so a scene built
+from Python is held to what a TOML file or ``--set`` is: a bad value raises the one-line
+:class:`~fxflex.errors.SceneError` naming the key. Beyond that the classes only hold values and
+derived quantities.
 """
 
 from __future__ import annotations
@@ -11,6 +14,8 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass, field
+
+from fxflex.scene.checks import check_keys, check_scene, check_section
 
 __all__ = [
     "Geometry", "Material", "Section", "Load", "Rotation", "Damping", "MeshSpec", "Reduction",
@@ -32,6 +37,9 @@ class Geometry:
     twist_deg: float = -45.0
     hub_radius: float = 0.0
 
+    def __post_init__(self) -> None:
+        check_section(self, "geometry")
+
     def size_y(self, s):
         """Section size along Y~ at normalised position s = X~/L in [0, 1] (linear taper)."""
         return self.root_y + (self.tip_y - self.root_y) * s
@@ -50,6 +58,9 @@ class Material:
     nu: float = 0.28
     rho: float = 7850.0
 
+    def __post_init__(self) -> None:
+        check_section(self, "material")
+
     @property
     def G(self) -> float:
         return self.E / (2.0 * (1.0 + self.nu))
@@ -66,12 +77,18 @@ class Material:
 class Section:
     torsion: str = "polar"
 
+    def __post_init__(self) -> None:
+        check_section(self, "section")
+
 
 @dataclass(frozen=True)
 class Load:
     line_load: float = -8000.0
     tip_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ramp_time: float = 300e-6
+
+    def __post_init__(self) -> None:
+        check_section(self, "load")
 
     def factor(self, t: float) -> float:
         """Load ramp: linear from 0 at t = 0 to 1 at ramp_time, then constant."""
@@ -86,6 +103,9 @@ class Rotation:
     profile: str = "constant"
     spinup_time: float = 0.0
 
+    def __post_init__(self) -> None:
+        check_section(self, "rotation")
+
     @property
     def omega(self) -> float:
         """Steady angular speed Omega_s (rad/s)."""
@@ -97,6 +117,9 @@ class Damping:
     c: float = 1000.0
     model: str = "relative"
 
+    def __post_init__(self) -> None:
+        check_section(self, "damping")
+
 
 @dataclass(frozen=True)
 class MeshSpec:
@@ -104,12 +127,18 @@ class MeshSpec:
     beam_elements: int = 10
     ancf_root: str = "free-axial"
 
+    def __post_init__(self) -> None:
+        check_section(self, "mesh")
+
 
 @dataclass(frozen=True)
 class Reduction:
     ffrf_modes: int = 30
     gcms_modes: int = 90
     gcms_gram_tol: float = 1e-6
+
+    def __post_init__(self) -> None:
+        check_section(self, "reduction")
 
 
 @dataclass(frozen=True)
@@ -123,6 +152,9 @@ class Scene:
     mesh: MeshSpec = field(default_factory=MeshSpec)
     reduction: Reduction = field(default_factory=Reduction)
 
+    def __post_init__(self) -> None:
+        check_scene(self)
+
     def to_dict(self) -> dict:
         """The full resolved scene as plain JSON-able data (tuples become lists)."""
         return json.loads(json.dumps(dataclasses.asdict(self)))
@@ -134,13 +166,18 @@ class Scene:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def replace(self, **sections) -> "Scene":
-        """Copy with whole sections or dotted keys replaced: ``replace(**{"rotation.rpm": 5e3})``."""
-        new = self
+        """Copy with whole sections or dotted keys replaced: ``replace(**{"rotation.rpm": 5e3})``.
+
+        The changes to one section are applied together and the scene is checked once at the
+        end, so ``replace(**{"rotation.profile": "spin-up", "rotation.spinup_time": 0.05})``
+        never passes through an invalid spin-up without its time."""
+        whole = {key: value for key, value in sections.items() if "." not in key}
+        changes: dict[str, dict] = {}
         for key, value in sections.items():
             if "." in key:
                 sec, name = key.split(".", 1)
-                new = dataclasses.replace(new, **{sec: dataclasses.replace(getattr(new, sec),
-                                                                         **{name: value})})
-            else:
-                new = dataclasses.replace(new, **{key: value})
-        return new
+                changes.setdefault(sec, {})[name] = value
+        check_keys(type(self), {**{sec: {} for sec in whole}, **changes})
+        for sec, fields in changes.items():
+            whole[sec] = dataclasses.replace(whole.get(sec, getattr(self, sec)), **fields)
+        return dataclasses.replace(self, **whole)

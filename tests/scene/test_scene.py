@@ -42,8 +42,8 @@ def test_hash_is_stable_and_sensitive():
     ("geometry.length=\"long\"", "geometry.length", "expected a number"),
     ("mesh.beam_elements=2.5", "mesh.beam_elements", "expected an integer"),
     ("mesh.solid=[10,4]", "mesh.solid", "list of 3"),
-    ("geometry.length=0", "geometry.length", "> 0"),
-    ("geometry.tip_z=-0.01", "geometry.tip_z", "> 0"),
+    ("geometry.length=0", "geometry.length", "allowed: [1e-06, 1e+06]"),
+    ("geometry.tip_z=-0.01", "geometry.tip_z", "allowed: (0, 1e+06]"),
     ("material.E=-1", "material.E", "> 0"),
     ("mesh.solid=[10,3,2]", "mesh.solid", "even"),
     ("mesh.solid=[10,4,1]", "mesh.solid", "even"),
@@ -60,6 +60,22 @@ def test_hash_is_stable_and_sensitive():
     ("reduction.gcms_gram_tol=2", "reduction.gcms_gram_tol", "(0, 1)"),
     ("geometry.length=nan", "geometry.length", "finite"),
     ("nodots=1", "nodots", "dotted key"),
+    # huge, tiny and non-finite values: the key and the allowed range (issue 11)
+    ("rotation.rpm=1e300", "rotation.rpm", "allowed: below 6.985e+04 rpm"),
+    ("rotation.rpm=nan", "rotation.rpm", "finite"),
+    ("rotation.rpm=inf", "rotation.rpm", "finite"),
+    ("geometry.twist_deg=1e300", "geometry.twist_deg", "allowed: |twist_deg| <= 854.1"),
+    ("geometry.twist_deg=-855", "geometry.twist_deg", "allowed: |twist_deg| <= 854.1"),
+    ("geometry.hub_radius=1e300", "geometry.hub_radius", "allowed: [0, 1e+06]"),
+    ("geometry.length=1e200", "geometry.length", "allowed: [1e-06, 1e+06]"),
+    ("geometry.length=5e-324", "geometry.length", "allowed: [1e-06, 1e+06]"),
+    ("geometry.length=" + "9" * 400, "geometry.length", "finite"),
+    ("geometry.root_y=1e7", "geometry.root_y", "allowed: (0, 1e+06]"),
+    ("material.E=1e308", "material.E", "allowed: below 7.055e+20 Pa"),
+    ("load.tip_force=[0,0,1e308]", "load.tip_force", "allowed: loads whose bending stress"),
+    ("load.line_load=-1e12", "load.line_load", "allowed: load.line_load at most 6.05e-05 times"),
+    ("damping.c=-0.0001", "damping.c", "allowed: >= 0"),
+    ("damping.c=1e999", "damping.c", "finite"),
 ])
 def test_bad_values_name_the_key(override, key, words):
     with pytest.raises(SceneError) as exc:
