@@ -169,7 +169,11 @@ def check_options(method: str, options: BuildOptions) -> None:
 
 
 def build(method: str, scene: Scene, comm, options: BuildOptions | None = None) -> Formulation:
-    """Build ``method`` for ``scene`` on communicator ``comm``."""
+    """Build ``method`` for ``scene`` on communicator ``comm``.
+
+    The cache entries the build writes appear only if it succeeds (:func:`fxflex.cache.deferred`),
+    so a build that fails leaves none behind."""
+    from fxflex import cache
     from fxflex.scene.load import validate_for
 
     options = options or BuildOptions()
@@ -181,7 +185,8 @@ def build(method: str, scene: Scene, comm, options: BuildOptions | None = None) 
         if exc.name == _MODULES[method]:
             raise FxflexError(f"--method: {method} is not implemented yet") from None
         raise
-    return module.build(scene, comm, options)
+    with cache.deferred():
+        return module.build(scene, comm, options)
 
 
 #: the paper's integrator and step per method (Sect. 4, SPEC section 4)

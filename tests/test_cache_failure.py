@@ -1,0 +1,121 @@
+"""A build that fails leaves no cache entry behind (issue 11): deferred entries, the temporary
+files of killed processes, and out-of-memory failures reported as one line."""
+
+import os
+import socket
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fxflex import cache
+from fxflex.formulation import build
+from fxflex.scene import Scene
+
+pytestmark = pytest.mark.serial
+
+SMALL = {"mesh.solid": (4, 2, 2), "reduction.ffrf_modes": 4, "reduction.gcms_modes": 6}
+
+
+@pytest.fixture
+def folder(tmp_path, monkeypatch):
+    monkeypatch.setenv("FXFLEX_CACHE", str(tmp_path))
+    monkeypatch.delenv("FXFLEX_NO_CACHE", raising=False)
+    return tmp_path
+
+
+def files(folder):
+    """Every file in the cache folder, hidden temporary files included."""
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file())
+
+
+def test_entries_saved_in_a_deferred_block_appear_when_it_ends(folder):
+    with cache.deferred():
+        cache.save("modes", "k1", {"a": np.arange(3.0)})
+        with cache.deferred():                          # a nested block joins the outer one
+            cache.save("reduced", "k2", {"a": np.ones(2)})
+        assert cache.load("modes", "k1") is None and cache.load("reduced", "k2") is None
+    assert files(folder) == ["modes/k1.npz", "reduced/k2.npz"]
+    assert np.array_equal(cache.load("modes", "k1")["a"], np.arange(3.0))
+
+
+def test_an_exception_in_a_deferred_block_leaves_the_cache_as_it_was(folder):
+    cache.save("modes", "old", {"a": np.zeros(1)})
+    with pytest.raises(RuntimeError, match="later stage"):
+        with cache.deferred():
+            cache.save("modes", "k1", {"a": np.arange(3.0)})
+            with cache.deferred():
+                cache.save("reduced", "k2", {"a": np.ones(2)})
+            raise RuntimeError("a later stage failed")
+    assert files(folder) == ["modes/old.npz"]
+    cache.save("modes", "k3", {"a": np.zeros(1)})       # outside a block: at once, as before
+    assert files(folder) == ["modes/k3.npz", "modes/old.npz"]
+
+
+def test_temporary_files_of_dead_processes_are_swept(folder):
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)
+    (folder / "meshes").mkdir()
+    host = socket.gethostname()
+    left = folder / "meshes" / f".{host}.{dead.stdout.strip()}.beam-abc.x1.msh"
+    left.write_bytes(b"half a mesh")
+    mine = cache.temporary(folder / "meshes", "beam-def", suffix=".msh")
+    other_host = folder / "meshes" / f".not-{host}.1.beam-ghi.x2.msh"
+    other_host.write_bytes(b"")
+    with cache.deferred():
+        pass
+    assert not left.exists() and mine.exists() and other_host.exists()
+
+
+def _fail_after(monkeypatch, target: str, exc: BaseException):
+    """Make the method ``target`` (dotted path) raise ``exc`` once it has done its work."""
+    import importlib
+
+    module_name, cls_name, attr = target.rsplit(".", 2)
+    cls = getattr(importlib.import_module(module_name), cls_name)
+    original = getattr(cls, attr)
+
+    def failing(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        raise exc
+
+    monkeypatch.setattr(cls, attr, failing)
+
+
+def test_tlf_build_failing_after_the_mesh_leaves_no_mesh_entry(folder, monkeypatch):
+    scene = Scene().replace(**SMALL)
+    _fail_after(monkeypatch, "fxflex.solid.model.SolidModel.__init__", RuntimeError("boom"))
+    from mpi4py import MPI
+
+    with pytest.raises(RuntimeError, match="boom"):
+        build("tlf", scene, MPI.COMM_WORLD)
+    assert files(folder) == []
+    monkeypatch.undo()
+    monkeypatch.setenv("FXFLEX_CACHE", str(folder))
+    monkeypatch.delenv("FXFLEX_NO_CACHE", raising=False)
+    build("tlf", scene, MPI.COMM_WORLD)                 # the same build, succeeding, keeps it
+    assert [f for f in files(folder) if f.startswith("meshes/")] != []
+    assert all(not os.path.basename(f).startswith(".") for f in files(folder))
+
+
+def test_ffrf_build_failing_after_modes_and_projections_leaves_nothing(folder, monkeypatch):
+    scene = Scene().replace(**SMALL)
+    _fail_after(monkeypatch, "fxflex.solid.ffrf.FFRF._build_operators", RuntimeError("boom"))
+    from mpi4py import MPI
+
+    with pytest.raises(RuntimeError, match="boom"):
+        build("ffrf", scene, MPI.COMM_WORLD)
+    assert files(folder) == []
+
+
+def test_memory_error_mid_build_is_one_line_and_leaves_no_entry(folder, monkeypatch, capsys):
+    from fxflex.cli import main
+
+    _fail_after(monkeypatch, "fxflex.solid.model.SolidModel.__init__",
+                MemoryError("Unable to allocate 1.3 GiB"))
+    status = main(["steady", "--method", "tlf", "--set", "mesh.solid=[4,2,2]", "--json"])
+    out, err = capsys.readouterr()
+    assert status == 2 and out == ""
+    assert err.count("\n") == 1 and err.startswith("fxflex: error: out of memory"), err
+    assert files(folder) == []
