@@ -171,14 +171,16 @@ def check_options(method: str, options: BuildOptions) -> None:
 def build(method: str, scene: Scene, comm, options: BuildOptions | None = None) -> Formulation:
     """Build ``method`` for ``scene`` on communicator ``comm``.
 
-    The cache entries the build writes appear only if it succeeds (:func:`fxflex.cache.deferred`),
-    so a build that fails leaves none behind."""
-    from fxflex import cache
+    Refused up front (one line) when the estimated memory exceeds what the machine has
+    (:func:`fxflex.memory.check`); the cache entries the build writes appear only if it succeeds
+    (:func:`fxflex.cache.deferred`), so a build that fails leaves none behind."""
+    from fxflex import cache, memory
     from fxflex.scene.load import validate_for
 
     options = options or BuildOptions()
     check_options(method, options)
     validate_for(method, scene)
+    memory.check(method, scene, comm, options)
     try:
         module = importlib.import_module(_MODULES[method])
     except ModuleNotFoundError as exc:
