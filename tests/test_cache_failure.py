@@ -68,6 +68,9 @@ def test_temporary_files_of_dead_processes_are_swept(folder):
     assert not left.exists() and mine.exists() and other_host.exists()
 
 
+_original: dict = {}
+
+
 def _fail_after(monkeypatch, target: str, exc: BaseException):
     """Make the method ``target`` (dotted path) raise ``exc`` once it has done its work."""
     import importlib
@@ -80,33 +83,27 @@ def _fail_after(monkeypatch, target: str, exc: BaseException):
         original(self, *args, **kwargs)
         raise exc
 
+    _original[target] = original
     monkeypatch.setattr(cls, attr, failing)
 
 
-def test_tlf_build_failing_after_the_mesh_leaves_no_mesh_entry(folder, monkeypatch):
-    scene = Scene().replace(**SMALL)
-    _fail_after(monkeypatch, "fxflex.solid.model.SolidModel.__init__", RuntimeError("boom"))
+@pytest.mark.parametrize("method, target, kinds", [
+    ("tlf", "fxflex.solid.model.SolidModel.__init__", {"meshes"}),
+    ("ffrf", "fxflex.solid.ffrf.FFRF._build_operators", {"meshes", "modes", "reduced"})])
+def test_a_build_failing_after_writing_entries_leaves_none(folder, monkeypatch, method, target,
+                                                            kinds):
+    """The entries were fine (the same build keeps them when it succeeds); a later stage failed."""
     from mpi4py import MPI
 
-    with pytest.raises(RuntimeError, match="boom"):
-        build("tlf", scene, MPI.COMM_WORLD)
-    assert files(folder) == []
-    monkeypatch.undo()
-    monkeypatch.setenv("FXFLEX_CACHE", str(folder))
-    monkeypatch.delenv("FXFLEX_NO_CACHE", raising=False)
-    build("tlf", scene, MPI.COMM_WORLD)                 # the same build, succeeding, keeps it
-    assert [f for f in files(folder) if f.startswith("meshes/")] != []
-    assert all(not os.path.basename(f).startswith(".") for f in files(folder))
-
-
-def test_ffrf_build_failing_after_modes_and_projections_leaves_nothing(folder, monkeypatch):
     scene = Scene().replace(**SMALL)
-    _fail_after(monkeypatch, "fxflex.solid.ffrf.FFRF._build_operators", RuntimeError("boom"))
-    from mpi4py import MPI
-
+    _fail_after(monkeypatch, target, RuntimeError("boom"))
     with pytest.raises(RuntimeError, match="boom"):
-        build("ffrf", scene, MPI.COMM_WORLD)
+        build(method, scene, MPI.COMM_WORLD)
     assert files(folder) == []
+    monkeypatch.setattr(target, _original[target])
+    build(method, scene, MPI.COMM_WORLD)
+    assert {f.split("/")[0] for f in files(folder)} == kinds
+    assert not any(os.path.basename(f).startswith(".") for f in files(folder))
 
 
 def test_memory_error_mid_build_is_one_line_and_leaves_no_entry(folder, monkeypatch, capsys):

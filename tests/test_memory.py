@@ -107,6 +107,13 @@ def test_tlf_options_are_estimated(case):
     assert MEASURED_RUN[case] <= est <= 1.5 * MEASURED_RUN[case], (case, est)
 
 
+def test_ranks_of_a_distributed_build_are_estimated():
+    """TLF 128 x 16 x 8 on 2 ranks: each rank's peak was at most 558 MB (measured)."""
+    big = Scene().replace(**{"mesh.solid": (128, 16, 8)})
+    est = memory.estimate("tlf", big, 2).total / 1e6
+    assert 2 * 558 <= est <= 1.5 * 2 * 558, est
+
+
 def _peak_mb(args, env) -> float:
     """Peak resident memory (MB) of ``fxflex`` with ``args``, run in a child of a fresh process
     (RUSAGE_CHILDREN then sees that run only)."""
