@@ -101,8 +101,7 @@ def estimate(method: str, scene: Scene, ranks: int = 1, options: BuildOptions | 
         per_rank = {"base": base, "dense matrices": dense * n * n,
                     "element tables": per_unknown * n}
         return Estimate(method, {k: ranks * v for k, v in per_rank.items()}, ranks)
-    nx, ny, nz = (float(v) for v in scene.mesh.solid)
-    n = 3.0 * nx * (ny + 1) * (nz + 1)
+    n = _unknowns(scene.mesh.solid)
     per_unknown, factor = SOLID[method]
     parts = {"base": ranks * SOLID_BASE, "mesh and matrices": per_unknown * n,
              "factorisation": factor * n ** (4.0 / 3.0)}
@@ -120,7 +119,14 @@ def estimate(method: str, scene: Scene, ranks: int = 1, options: BuildOptions | 
     return Estimate(method, {k: v if k == "base" else spread * v for k, v in parts.items()}, ranks)
 
 
-# -- what the machine has ---------------------------------------------------------------------------
+def _unknowns(divisions) -> float:
+    """Nodal unknowns of a solid mesh after the root clamp, 3 nx (ny + 1) (nz + 1) (as
+    ``fxflex.solid.model.solid_dof_count``, which imports dolfinx)."""
+    nx, ny, nz = (float(v) for v in divisions)
+    return 3.0 * nx * (ny + 1) * (nz + 1)
+
+
+# -- what the machine has ----------------------------------------------------------------------
 
 def _read_int(path: Path) -> int | None:
     try:
@@ -214,7 +220,7 @@ def format_size(n: float) -> str:
     return f"{n:.0f} B"
 
 
-# -- the check before a build -----------------------------------------------------------------------
+# -- the check before a build ------------------------------------------------------------------
 
 def _largest(method: str, scene: Scene, ranks: int, room: float,
              options: BuildOptions | None) -> str:
@@ -232,8 +238,8 @@ def _largest(method: str, scene: Scene, ranks: int, room: float,
     best = _scaled(method, scene, lo)
     if method in BEAMS:
         return f"up to about {best.mesh.beam_elements} elements on this machine"
-    return (f"meshes up to about {3 * best.mesh.solid[0] * (best.mesh.solid[1] + 1) * (best.mesh.solid[2] + 1):.2g} "
-            f"unknowns on this machine, e.g. mesh.solid = {list(best.mesh.solid)}")
+    return (f"meshes up to about {_unknowns(best.mesh.solid):.2g} unknowns on this machine, "
+            f"e.g. mesh.solid = {list(best.mesh.solid)}")
 
 
 def _scaled(method: str, scene: Scene, s: float) -> Scene:

@@ -106,11 +106,19 @@ def test_a_build_failing_after_writing_entries_leaves_none(folder, monkeypatch, 
     assert not any(os.path.basename(f).startswith(".") for f in files(folder))
 
 
-def test_memory_error_mid_build_is_one_line_and_leaves_no_entry(folder, monkeypatch, capsys):
+def _petsc_out_of_memory():
+    from petsc4py import PETSc
+
+    return PETSc.Error(55)                      # PETSC_ERR_MEM
+
+
+@pytest.mark.parametrize("error", [lambda: MemoryError("Unable to allocate 1.3 GiB"),
+                                   _petsc_out_of_memory], ids=["numpy", "petsc"])
+def test_memory_error_mid_build_is_one_line_and_leaves_no_entry(folder, monkeypatch, capsys,
+                                                                 error):
     from fxflex.cli import main
 
-    _fail_after(monkeypatch, "fxflex.solid.model.SolidModel.__init__",
-                MemoryError("Unable to allocate 1.3 GiB"))
+    _fail_after(monkeypatch, "fxflex.solid.model.SolidModel.__init__", error())
     status = main(["steady", "--method", "tlf", "--set", "mesh.solid=[4,2,2]", "--json"])
     out, err = capsys.readouterr()
     assert status == 2 and out == ""
