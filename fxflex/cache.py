@@ -14,6 +14,14 @@ temporary file in the same folder, then ``os.replace``): a reader sees either no
 complete one, so concurrent runs are safe; two runs that miss at once both compute and the last
 rename wins with identical content. A file that cannot be read counts as a miss.
 
+A build never leaves an entry behind when it fails (issue 11): inside :func:`deferred` (which
+:func:`fxflex.formulation.build` opens around every build) a finished temporary file is only
+recorded, and becomes its entry when the block ends without an exception; an exception removes
+every temporary file of the block instead. Temporary files are named after the host and the
+process that writes them (``.<host>.<pid>.<name>...``), so that the temporary files of a process
+that was killed (the kernel's out-of-memory killer gives no chance to clean up) are removed by the
+next build on that host (:func:`sweep`); ``fxflex cache clear`` removes them too.
+
 MPI is the callers' business (this module does no communication): the eigenmodes and the reduced
 models are stored in a partition-independent form by rank 0 and read by every rank, the TLF
 invariant matrices (one rank's subdomain) per rank and keyed by that rank's own numbering.
@@ -22,19 +30,21 @@ invariant matrices (one rank's subdomain) per rank and keyed by that rank's own 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import hashlib
 import importlib.metadata
 import importlib.util
 import json
 import os
 import shutil
+import socket
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 __all__ = ["cache_root", "cache_dir", "enabled", "code_version", "entry_key", "load", "save",
-           "publish", "usage", "clear", "bypass", "KINDS"]
+           "publish", "usage", "clear", "bypass", "deferred", "temporary", "sweep", "KINDS"]
 
 #: what is cached, and by whom
 KINDS = {"meshes": "gmsh .msh files of the solid beam (fxflex.mesh.solid)",
@@ -74,6 +84,82 @@ def bypass(*kinds: str):
             del os.environ["FXFLEX_NO_CACHE"]
         else:
             os.environ["FXFLEX_NO_CACHE"] = old
+
+
+#: the (temporary file, entry) pairs published inside the innermost open :func:`deferred` block;
+#: a context variable rather than an argument so that every writer (meshes, modes, reduced models,
+#: invariants) joins the build's block without threading it through the formulations
+_PENDING: contextvars.ContextVar[list[tuple[Path, Path]] | None] = contextvars.ContextVar(
+    "fxflex_cache_pending", default=None)
+
+
+@contextlib.contextmanager
+def deferred():
+    """``with deferred():`` -- entries published inside the block appear only if it ends without
+    an exception; otherwise their temporary files are deleted and the cache is as before. A block
+    opened inside another joins it (the outer block decides). Also sweeps the temporary files of
+    dead processes (:func:`sweep`) when the outermost block opens."""
+    if _PENDING.get() is not None:
+        yield
+        return
+    sweep()
+    pending: list[tuple[Path, Path]] = []
+    token = _PENDING.set(pending)
+    try:
+        yield
+    except BaseException:
+        for tmp, _ in pending:
+            _remove(tmp)
+        raise
+    else:
+        for i, (tmp, path) in enumerate(pending):
+            try:
+                os.replace(tmp, path)
+            except OSError:             # not committed: only costs the next run time
+                for rest, _ in pending[i:]:
+                    _remove(rest)
+                break
+    finally:
+        _PENDING.reset(token)
+
+
+def _remove(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        os.unlink(path)
+
+
+def temporary(folder: Path, name: str, suffix: str = ".tmp") -> Path:
+    """A new empty temporary file in ``folder`` for entry ``name``, named after this host and
+    process (how :func:`sweep` knows whose it is)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{socket.gethostname()}.{os.getpid()}.{name}.",
+                               suffix=suffix, dir=folder)
+    os.close(fd)
+    return Path(tmp)
+
+
+def sweep() -> list[Path]:
+    """Delete the temporary files left in the cache by processes of this host that no longer
+    run (a build killed before it could clean up); returns what was deleted."""
+    root, host = cache_root(), socket.gethostname()
+    removed = []
+    if not root.is_dir():
+        return removed
+    for tmp in root.glob(f"*/.{host}.*"):
+        pid = tmp.name[len(host) + 2:].split(".", 1)[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            _remove(tmp)
+            removed.append(tmp)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:             # someone else's process
+        return True
+    return True
 
 
 def cache_dir(kind: str) -> Path:
@@ -143,14 +229,13 @@ def save(kind: str, key: str, arrays: dict) -> Path | None:
     if not enabled(kind):
         return None
     try:
-        folder = cache_dir(kind)
-        fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".tmp", dir=folder)
+        tmp = temporary(cache_dir(kind), key)
         try:
-            with os.fdopen(fd, "wb") as fh:
+            with open(tmp, "wb") as fh:
                 np.savez(fh, **{k: np.asarray(v) for k, v in arrays.items()})
             publish(tmp, _path(kind, key))
         except BaseException:
-            os.unlink(tmp)
+            _remove(tmp)
             raise
     except OSError:
         return None
@@ -159,9 +244,14 @@ def save(kind: str, key: str, arrays: dict) -> Path | None:
 
 def publish(tmp: str | Path, path: Path) -> None:
     """Make a finished temporary file the entry ``path`` in one step (readable by all, as a
-    shared cache folder needs: mkstemp creates files private to their owner)."""
+    shared cache folder needs: mkstemp creates files private to their owner) -- at once, or,
+    inside :func:`deferred`, when the block ends well."""
     os.chmod(tmp, 0o644)
-    os.replace(tmp, path)
+    pending = _PENDING.get()
+    if pending is None:
+        os.replace(tmp, path)
+    else:
+        pending.append((Path(tmp), Path(path)))
 
 
 def usage() -> dict[str, dict]:

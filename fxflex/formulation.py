@@ -149,6 +149,10 @@ _MODULES = {"ffrf": "fxflex.solid.ffrf", "gcms": "fxflex.solid.gcms", "tlf": "fx
             "lebb": "fxflex.beam.lebb", "nebb": "fxflex.beam.nebb", "ancf": "fxflex.beam.ancf"}
 
 
+#: PETSc's error code for a failed allocation (petscerror.h)
+PETSC_ERR_MEM = 55
+
+
 def check_options(method: str, options: BuildOptions) -> None:
     """Reject options that do not apply to ``method`` with one line naming what is allowed."""
     if method not in METHODS:
@@ -169,19 +173,34 @@ def check_options(method: str, options: BuildOptions) -> None:
 
 
 def build(method: str, scene: Scene, comm, options: BuildOptions | None = None) -> Formulation:
-    """Build ``method`` for ``scene`` on communicator ``comm``."""
+    """Build ``method`` for ``scene`` on communicator ``comm``.
+
+    Refused up front (one line) when the estimated memory exceeds what the machine has
+    (:func:`fxflex.memory.check`); the cache entries the build writes appear only if it succeeds
+    (:func:`fxflex.cache.deferred`), so a build that fails leaves none behind. Running out of
+    memory inside PETSc raises :class:`MemoryError`, as numpy does."""
+    from fxflex import cache, memory
     from fxflex.scene.load import validate_for
 
     options = options or BuildOptions()
     check_options(method, options)
     validate_for(method, scene)
+    memory.check(method, scene, comm, options)
     try:
         module = importlib.import_module(_MODULES[method])
     except ModuleNotFoundError as exc:
         if exc.name == _MODULES[method]:
             raise FxflexError(f"--method: {method} is not implemented yet") from None
         raise
-    return module.build(scene, comm, options)
+    with cache.deferred():
+        try:
+            return module.build(scene, comm, options)
+        except Exception as exc:
+            # PETSc's (and so MUMPS's and SLEPc's) failed allocation is an error code, not
+            # Python's MemoryError: made one, the CLI reports it as out of memory in one line
+            if getattr(exc, "ierr", None) == PETSC_ERR_MEM:
+                raise MemoryError(str(exc)) from exc
+            raise
 
 
 #: the paper's integrator and step per method (Sect. 4, SPEC section 4)

@@ -115,8 +115,8 @@ def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = T
                         folder = cache.cache_dir("meshes")
                     except OSError:             # not writable: mesh without caching
                         use_cache = False
-                fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".msh", dir=folder)
-                os.close(fd)
+                tmp = str(cache.temporary(folder or Path(tempfile.gettempdir()), path.stem,
+                                          suffix=".msh"))
                 try:
                     gmsh.write(tmp)
                     gmsh.clear()

@@ -199,7 +199,7 @@ def _write(model: SolidModel, key: str, modes: ClampedModes) -> None:
             vectors[numbers] = vec.reshape(-1, 3, modes.count)
         cache.save("modes", key, {"omega2": modes.omega2, "errors": modes.errors,
                                   "coords": coords, "vectors": vectors.reshape(-1, modes.count)})
-    comm.Barrier()          # the entry exists for every rank once this returns
+    comm.Barrier()          # the entry (inside a build: its pending file) exists once this returns
 
 
 def _read(model: SolidModel, key: str, count: int) -> ClampedModes | None:

@@ -1,0 +1,284 @@
+"""The memory a build needs, estimated before building, and the memory this machine has (issue 11).
+
+:func:`estimate` predicts the peak resident memory of ``fxflex steady`` (build, steady state and
+stability verdict; ``fxflex run`` needs about the same or less) from the scene alone, without
+meshing, as a sum of parts whose coefficients are fitted to the measured peak resident set size
+of real builds (docs/robustness.md, "Memory and size", has the measurements and the laws):
+
+- beams (LEBB, NEBB, ANCF) on n unknowns: dense linear algebra, so ``dense matrices`` = c n^2
+  bytes (the model's matrices, their M^-1 products, the Newton tangent, the 2n x 2n companion
+  matrix of the stability verdict and its eigen-decomposition), and ``element tables`` per
+  unknown;
+- solids (FFRF, GCMS, TLF) on n = 3 nx (ny + 1) (nz + 1) unknowns: ``mesh and matrices`` per
+  unknown (gmsh model, dolfinx mesh and dof maps, sparse K, M or Jacobian, work vectors),
+  ``factorisation`` (MUMPS; the fill of a 3-D factor grows as n^(4/3), nested dissection's law
+  for meshes refined in all three directions, which the factors of these meshes follow: 9.4 to
+  12.8 n^(4/3) entries from 5e3 to 2e5 unknowns), ``modes`` (FFRF, GCMS: per unknown and clamped
+  mode) and TLF's ``invariants`` (``--force-eval invariant``) and ``mass factorisation``
+  (``--mass consistent``);
+- ``base``: the interpreter and the libraries once imported, per rank.
+
+Under MPI the solid parts are shared out over the ranks and the beams are replicated on every
+rank; :func:`check` adds up the ranks that share one machine and compares that with the machine's
+:func:`available` memory, refusing the build with one line (:class:`~fxflex.errors.FxflexError`)
+that names the estimate, what is available and the largest size that fits.
+``FXFLEX_MEMORY_CHECK=0`` skips the check; ``FXFLEX_MEMORY_LIMIT=8G`` caps what it counts on.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from fxflex.errors import FxflexError
+from fxflex.scene import METHODS, Scene
+
+if TYPE_CHECKING:
+    from fxflex.formulation import BuildOptions
+
+__all__ = ["Estimate", "estimate", "available", "check", "parse_size", "format_size",
+           "BEAMS", "SOLIDS"]
+
+BEAMS = ("lebb", "nebb", "ancf")
+SOLIDS = ("ffrf", "gcms", "tlf")
+
+#: Fitted coefficients (bytes) of the parts, per method: least squares on the measured peaks,
+#: raised by about 12 % so that the estimate lies above every measurement (docs/robustness.md).
+#: Beams: the interpreter with numpy and scipy, per unknown (quadrature and element tables, the
+#: invariant engines of ANCF) and per unknown squared (dense matrices: 18 doubles for LEBB and
+#: NEBB, 44 for ANCF, whose tangent and companion matrices carry all 21 slot coordinates).
+BEAM = {"lebb": (65e6, 50e3, 145.0), "nebb": (65e6, 50e3, 145.0), "ancf": (70e6, 195e3, 350.0)}
+#: Solids: the interpreter with dolfinx, PETSc and SLEPc (per rank); per unknown (mesh, dof maps,
+#: sparse K, M or Jacobian, work vectors); per unknown and clamped mode (FFRF, GCMS: the
+#: eigenvectors, SLEPc's basis of about twice as many, the gathered copy); per unknown^(4/3)
+#: (MUMPS: 9.4 to 12.8 n^(4/3) entries of about 9 bytes per factor; TLF's steady Newton and its
+#: stability verdict hold about two); TLF with ``--force-eval invariant``: per unknown (the
+#: invariant matrices K_L, K_N2, K_N3 and the pair map); ``--mass consistent``: one more factor
+SOLID_BASE = 180e6
+SOLID = {"ffrf": (2.6e3, 130.0), "gcms": (2.6e3, 130.0), "tlf": (2.85e3, 245.0)}
+PER_MODE = 46.0
+INVARIANTS = 12e3
+#: the solid parts grow by this fraction per rank beyond the first (TLF 128 x 16 x 8 on 2 ranks:
+#: 2 x 558 MB at most against 808 MB on one)
+MPI_OVERHEAD = 0.1
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Peak memory of a build in bytes, by part, for ``ranks`` ranks on one machine."""
+
+    method: str
+    parts: dict[str, float]
+    ranks: int = 1
+
+    @property
+    def total(self) -> float:
+        return sum(self.parts.values())
+
+    def describe(self) -> str:
+        """'about 31 GB (dense matrices 20 GB, ...)': the total and its largest parts."""
+        parts = sorted(((v, k) for k, v in self.parts.items() if k != "base"), reverse=True)
+        inner = ", ".join(f"{k} {format_size(v)}" for v, k in parts if v >= 0.05 * self.total)
+        return f"about {format_size(self.total)}" + (f" ({inner})" if inner else "")
+
+
+def estimate(method: str, scene: Scene, ranks: int = 1, options: BuildOptions | None = None
+             ) -> Estimate:
+    """The peak memory of building ``method`` for ``scene`` with ``options`` and solving its
+    steady state (or running it) on ``ranks`` ranks of one machine (module docstring)."""
+    if method not in METHODS:
+        raise FxflexError(f"--method: {method!r} is not a method; allowed: {' '.join(METHODS)}")
+    ranks = max(1, int(ranks))
+    if method in BEAMS:
+        from fxflex.formulation import dof_count
+
+        n = float(dof_count(method, scene))
+        base, per_unknown, dense = BEAM[method]
+        per_rank = {"base": base, "dense matrices": dense * n * n,
+                    "element tables": per_unknown * n}
+        return Estimate(method, {k: ranks * v for k, v in per_rank.items()}, ranks)
+    n = _unknowns(scene.mesh.solid)
+    per_unknown, factor = SOLID[method]
+    parts = {"base": ranks * SOLID_BASE, "mesh and matrices": per_unknown * n,
+             "factorisation": factor * n ** (4.0 / 3.0)}
+    if method == "ffrf":
+        parts["modes"] = PER_MODE * n * scene.reduction.ffrf_modes
+    elif method == "gcms":
+        parts["modes"] = PER_MODE * n * (scene.reduction.gcms_modes // 3)
+    else:
+        if getattr(options, "force_eval", None) == "invariant":
+            parts["invariants"] = INVARIANTS * n
+        if getattr(options, "mass", None) == "consistent":
+            parts["mass factorisation"] = SOLID["ffrf"][1] * n ** (4.0 / 3.0)
+    # a distributed factor and mesh carry ghosts and halo copies: measured +10 % at 2 ranks
+    spread = 1.0 + MPI_OVERHEAD * (ranks - 1)
+    return Estimate(method, {k: v if k == "base" else spread * v for k, v in parts.items()}, ranks)
+
+
+def _unknowns(divisions) -> float:
+    """Nodal unknowns of a solid mesh after the root clamp, 3 nx (ny + 1) (nz + 1) (as
+    ``fxflex.solid.model.solid_dof_count``, which imports dolfinx)."""
+    nx, ny, nz = (float(v) for v in divisions)
+    return 3.0 * nx * (ny + 1) * (nz + 1)
+
+
+# -- what the machine has ----------------------------------------------------------------------
+
+def _read_int(path: Path) -> int | None:
+    try:
+        text = path.read_text().split()[0]
+    except (OSError, IndexError):
+        return None
+    return int(text) if text.isdigit() else None
+
+
+def _meminfo(path: Path) -> int | None:
+    try:
+        for line in path.read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _cgroup_free(proc: Path, cgroup: Path) -> int | None:
+    """Room left under the memory limits of this process's cgroups (v2: memory.max of its group
+    and every parent; v1: memory.limit_in_bytes), reclaimable page cache counted as free."""
+    try:
+        lines = (proc / "self" / "cgroup").read_text().splitlines()
+    except OSError:
+        return None
+    best = None
+    for line in lines:
+        _, controllers, rel = line.split(":", 2)
+        if controllers == "":
+            base, files = cgroup, ("memory.max", "memory.current", "inactive_file")
+        elif "memory" in controllers.split(","):
+            base = cgroup / "memory"
+            files = ("memory.limit_in_bytes", "memory.usage_in_bytes", "total_inactive_file")
+        else:
+            continue
+        leaf = base / rel.strip("/")
+        for folder in (leaf, *leaf.parents):
+            if folder != base and base not in folder.parents:
+                break
+            limit, used = _read_int(folder / files[0]), _read_int(folder / files[1])
+            if limit is None or used is None or limit >= 1 << 60:      # "max": no limit
+                continue
+            free = limit - used + _stat(folder / "memory.stat", files[2])
+            best = free if best is None else min(best, free)
+    return best
+
+
+def _stat(path: Path, name: str) -> int:
+    try:
+        for line in path.read_text().splitlines():
+            key, _, value = line.partition(" ")
+            if key == name:
+                return int(value)
+    except (OSError, ValueError):
+        pass
+    return 0
+
+
+def available(proc: Path = Path("/proc"), cgroup: Path = Path("/sys/fs/cgroup")) -> int | None:
+    """Bytes a new build may use on this machine: MemAvailable of ``/proc/meminfo`` or the room
+    under this process's cgroup memory limit, whichever is smaller, and at most
+    ``FXFLEX_MEMORY_LIMIT`` if set; None when nothing is known."""
+    values = [v for v in (_meminfo(proc / "meminfo"), _cgroup_free(proc, cgroup)) if v is not None]
+    limit = os.environ.get("FXFLEX_MEMORY_LIMIT", "").strip()
+    if limit:
+        values.append(parse_size(limit, "FXFLEX_MEMORY_LIMIT"))
+    return max(0, min(values)) if values else None
+
+
+_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def parse_size(text: str, key: str) -> int:
+    """'8G', '512M', '1.5e9' -> bytes (binary K, M, G, T)."""
+    match = re.fullmatch(r"\s*([0-9.eE+]+)\s*([KMGT]?)i?B?\s*", text, flags=re.IGNORECASE)
+    try:
+        value = float(match.group(1)) * _UNITS[match.group(2).upper()] if match else math.nan
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value < 0:
+        raise FxflexError(f"{key}: {text!r} is not a size; allowed: a number of bytes, optionally "
+                          f"with K, M, G or T (e.g. 8G)")
+    return int(value)
+
+
+def format_size(n: float) -> str:
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
+        if n >= scale or unit == "MB":
+            return f"{n / scale:.3g} {unit}"
+    return f"{n:.0f} B"
+
+
+# -- the check before a build ------------------------------------------------------------------
+
+def _largest(method: str, scene: Scene, ranks: int, room: float,
+             options: BuildOptions | None) -> str:
+    """What fits in ``room`` bytes: the largest beam element count, or the largest solid mesh of
+    the scene's proportions (bisection on the estimate, which grows with the size)."""
+    def fits(s: float) -> bool:
+        return estimate(method, _scaled(method, scene, s), ranks, options).total <= room
+
+    if not fits(1e-9):
+        return "nothing: the libraries alone need more"
+    lo, hi = 1e-9, 1.0
+    for _ in range(80):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    best = _scaled(method, scene, lo)
+    if method in BEAMS:
+        return f"up to about {best.mesh.beam_elements} elements on this machine"
+    return (f"meshes up to about {_unknowns(best.mesh.solid):.2g} unknowns on this machine, "
+            f"e.g. mesh.solid = {list(best.mesh.solid)}")
+
+
+def _scaled(method: str, scene: Scene, s: float) -> Scene:
+    """The scene with its mesh scaled by s (beams: the element count; solids: each division by
+    s^(1/3), Y and Z kept even)."""
+    if method in BEAMS:
+        return scene.replace(**{"mesh.beam_elements": max(1, int(scene.mesh.beam_elements * s))})
+    nx, ny, nz = scene.mesh.solid
+    f = s ** (1.0 / 3.0)
+    even = lambda v: max(2, 2 * int(v * f / 2))
+    return scene.replace(**{"mesh.solid": (max(1, int(nx * f)), even(ny), even(nz))})
+
+
+def check(method: str, scene: Scene, comm, options: BuildOptions | None = None
+          ) -> Estimate | None:
+    """Refuse (FxflexError, on every rank) a build whose estimate exceeds the available memory of
+    a machine it runs on; the ranks of one machine (MPI shared-memory node) are added up. Returns
+    the estimate, or None when ``FXFLEX_MEMORY_CHECK=0``. Collective."""
+    if os.environ.get("FXFLEX_MEMORY_CHECK", "").strip() == "0":
+        return None
+    from mpi4py import MPI
+
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED) if comm.size > 1 else None
+    local_ranks = node.size if node is not None else 1
+    if node is not None:
+        node.Free()
+    mine = estimate(method, scene, comm.size, options)
+    need = mine.total * local_ranks / comm.size
+    room = available()
+    worst = comm.allreduce((room / need if room is not None else math.inf, comm.rank), op=MPI.MIN)
+    need, room, local_ranks = comm.bcast((need, room, local_ranks), root=worst[1])
+    if worst[0] >= 1.0:
+        return mine
+    key = "mesh.beam_elements" if method in BEAMS else "mesh.solid"
+    value = scene.mesh.beam_elements if method in BEAMS else list(scene.mesh.solid)
+    share = f" ({local_ranks} ranks on one machine)" if comm.size > 1 else ""
+    node_est = Estimate(method, {k: v * local_ranks / comm.size for k, v in mine.parts.items()})
+    raise FxflexError(
+        f"{key} = {value}: the {method} build needs {node_est.describe()}{share}; "
+        f"{format_size(room)} available; allowed: "
+        f"{_largest(method, scene, comm.size, room * comm.size / local_ranks, options)} "
+        f"(FXFLEX_MEMORY_CHECK=0 builds anyway)")
