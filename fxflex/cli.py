@@ -402,7 +402,8 @@ def cmd_run(args, comm) -> None:
                                 "dof": form.dof, "series": None,
                                 "checkpoint": {"path": os.path.abspath(ckpt_path),
                                                "every": ckpt_every}},
-            series=writer, last=(os.path.abspath(args.resume), resumed["step"]) if resumed else None)
+            series=writer,
+            last=(os.path.abspath(args.resume), resumed["step"]) if resumed else None)
     progress = Progress(nsteps, f"{args.method} {integrator} dt={dt:.3g}",
                         enabled=comm.rank == 0)
 
