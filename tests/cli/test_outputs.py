@@ -53,7 +53,8 @@ def snapshot(folder) -> dict:
     (LEBB + ["--out", "/proc/a.csv"], ["--out", "/proc"]),
     (LEBB + ["--out", "sub"], ["--out", "sub", "is a directory"]),
     (LEBB + ["--out", "/dev/full"], ["--out", "/dev/full", "not a regular file"]),
-    (LEBB + ["--checkpoint", "/dev/full"], ["--checkpoint", "/dev/full"]),
+    # a checkpoint is renamed over its file: a wrong verdict must not replace a system device
+    (LEBB + ["--checkpoint", "pipe"], ["--checkpoint", "pipe", "not a regular file"]),
     (LEBB + ["--out", "s.toml/a.csv"], ["--out", "not a directory"]),
     (["modes", "--method", "lebb", "--out", "s.toml"], ["--out", "s.toml", "not a directory"]),
     (["modes", "--method", "lebb", "--out", "/proc/m"], ["--out", "/proc"]),
@@ -67,13 +68,15 @@ def test_an_output_that_cannot_be_written_or_destroys_data_is_refused(args, word
     (tmp_path / "s.toml").write_text(SCENE)
     (tmp_path / "link.csv").symlink_to("s.toml")
     (tmp_path / "sub").mkdir()
+    os.mkfifo(tmp_path / "pipe")
     before = snapshot(tmp_path)
     r = run(*args, cwd=tmp_path, timeout=300)
     assert r.returncode == 2, r.stderr
     line = error_line(r)
     assert all(w in line for w in words), line
     assert snapshot(tmp_path) == before and sorted(p.name for p in tmp_path.iterdir()) == [
-        "link.csv", "s.toml", "sub"]
+        "link.csv", "pipe", "s.toml", "sub"]
+    assert (tmp_path / "pipe").is_fifo()
     assert list((tmp_path / "sub").iterdir()) == []
 
 
