@@ -3,7 +3,12 @@
 Every command takes ``--scene FILE.toml``, ``--set KEY=VALUE`` (repeatable) and ``--json``.
 With ``--json`` stdout carries one JSON object and nothing else; progress and logs go to stderr.
 Bad input ends with one line on stderr naming what is wrong and what is allowed, exit status 2,
-and nothing written. Under MPI every rank runs the command; only rank 0 prints and writes.
+and nothing written: output paths are checked before anything is built (:mod:`fxflex.io.paths`).
+An output that fails while the command runs, or an unexpected error, is one line too, exit
+status 1; an interrupt exits 130 (a run first flushes its series and reports what it did).
+Under MPI every rank runs the command; only rank 0 prints and writes. An error every rank meets
+together is printed once by rank 0; a rank that fails alone prints its line and aborts the job
+(:func:`_fail`), so that no rank waits forever in a collective for it.
 """
 
 from __future__ import annotations
@@ -15,15 +20,22 @@ import math
 import os
 import sys
 import time
+import traceback
 
 from fxflex import __version__
 from fxflex.cache import KINDS as CACHE_KINDS
-from fxflex.errors import FxflexError
+from fxflex.errors import FxflexError, OutputError
+from fxflex.io.paths import Output, check_paths
 from fxflex.scene import METHODS, load_scene
 
 __all__ = ["main"]
 
 log = logging.getLogger("fxflex")
+
+#: seconds the ranks that fail wait for the others before one aborts the job alone
+AGREE_S = 5.0
+#: exit statuses: bad input, output or run failure, interrupt
+EXIT_INPUT, EXIT_FAILURE, EXIT_INTERRUPT = 2, 1, 130
 
 
 BENCHES = ("steady", "tlf", "reduced", "beams", "paper", "accuracy", "stability", "skip",
@@ -276,17 +288,21 @@ def cmd_run(args, comm) -> None:
                                       load_checkpoint)
     from fxflex.io.series import prefix_digest
     from fxflex.time import Resume, diagnose, simulate
+    from fxflex.time.driver import step_to_end
     from fxflex.time.diagnosis import ab2_warning
 
     scene = _scene_from_args(args)
     options = BuildOptions(force_eval=args.force_eval, mass=args.mass, need_steady=False)
     check_options(args.method, options)
-    integrator, dt = default_integration(args.method, args.integrator, args.dt,
-                                         scene.rotation.rpm)
+    integrator, asked = default_integration(args.method, args.integrator, args.dt,
+                                            scene.rotation.rpm)
+    dt, nsteps = step_to_end(args.t_end, asked)
+    warnings = []
+    if args.dt is not None and dt != asked:
+        warnings.append(f"--dt {asked:g} s does not divide --t-end {args.t_end:g} s: the step was "
+                        f"shortened to {dt:.9g} s ({nsteps} steps) to end at t_end")
+        log.warning(warnings[-1])
     rho_inf = None
-    if integrator == "generalized-alpha" and args.dt is None:
-        # the largest step not above the default that ends exactly at --t-end
-        dt = args.t_end / math.ceil(args.t_end / dt * (1.0 - 1e-12))
     if integrator == "generalized-alpha":
         from fxflex.time.implicit import DEFAULT_RHO_INF
         rho_inf = DEFAULT_RHO_INF if args.rho_inf is None else args.rho_inf
@@ -296,18 +312,13 @@ def cmd_run(args, comm) -> None:
     elif args.rho_inf is not None:
         raise FxflexError(f"--rho-inf: only applies to --integrator generalized-alpha "
                           f"(the integrator is {integrator})")
-    for flag in ("out", "fields", "checkpoint"):
-        path = getattr(args, flag)
-        if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
-            raise FxflexError(f"--{flag}: directory does not exist: "
-                              f"{os.path.dirname(os.path.abspath(path))}")
     if args.fields_every < 1:
         raise FxflexError(f"--fields-every: must be >= 1, got {args.fields_every}")
     if args.checkpoint_every is not None and args.checkpoint_every < 1:
         raise FxflexError(f"--checkpoint-every: must be >= 1 step, got {args.checkpoint_every}")
     out_path, ckpt_path, ckpt_every = args.out, args.checkpoint, args.checkpoint_every
     resumed = series = None
-    if args.resume:
+    if args.resume is not None:
         if args.fields:
             raise FxflexError("--fields: cannot be combined with --resume (an XDMF series "
                               "cannot be continued); write the fields in a run of its own")
@@ -315,8 +326,7 @@ def cmd_run(args, comm) -> None:
         series = resumed.get("series")
         if series is None and args.out:
             raise FxflexError("--out: the checkpointed run wrote no series; resume without --out")
-        out_path = args.out or (series["path"] if series else None)
-    nsteps = max(int(round(args.t_end / dt)), 1)
+        out_path = args.out if args.out is not None else (series["path"] if series else None)
     sample_dt = args.sample_dt or max(dt, args.t_end / 20000)
     sample_every = max(1, int(round(sample_dt / dt)))
     if not (out_path or args.fields):
@@ -326,15 +336,6 @@ def cmd_run(args, comm) -> None:
                 "rho_inf": rho_inf}
     if resumed is not None:
         check_settings(resumed, scene.to_dict(), scene.hash, settings, args.resume)
-        if series is not None:
-            ok = None
-            if comm.rank == 0:
-                ok = (os.path.isfile(out_path)
-                      and prefix_digest(out_path, series["bytes"]) == series["sha256"])
-            if not comm.bcast(ok, root=0):
-                raise FxflexError(f"--resume: {out_path} does not begin with the "
-                                  f"{series['bytes']} bytes the checkpoint recorded (a different "
-                                  "or shortened file); pass the run's series with --out")
         ckpt_path = ckpt_path or resumed["checkpoint"]["path"]
         ckpt_every = ckpt_every or resumed["checkpoint"]["every"]
     if ckpt_every is not None and ckpt_path is None:
@@ -344,6 +345,21 @@ def cmd_run(args, comm) -> None:
         ckpt_path = out_path + ".ckpt"
     if ckpt_path is not None and ckpt_every is None:
         ckpt_every = max(nsteps // 20, 1)         # every 5 % of the run
+    fields_h5 = (os.path.splitext(args.fields)[0] + ".h5",) if args.fields else ()
+    check_paths(comm, [Output("--out", out_path), Output("--fields", args.fields, suffix=".xdmf",
+                                                         beside=fields_h5),
+                       Output("--checkpoint", ckpt_path)],
+                inputs={"--scene": args.scene, "--resume": args.resume},
+                may_replace=(("--checkpoint", "--resume"),))
+    if series is not None:
+        ok = None
+        if comm.rank == 0:
+            ok = (os.path.isfile(out_path)
+                  and prefix_digest(out_path, series["bytes"]) == series["sha256"])
+        if not comm.bcast(ok, root=0):
+            raise FxflexError(f"--resume: {out_path} does not begin with the {series['bytes']} "
+                              "bytes the checkpoint recorded (a different or shortened file); "
+                              "pass the run's series with --out")
     t0 = time.perf_counter()
     form = build(args.method, scene, comm, options)
     t_pre = time.perf_counter() - t0
@@ -375,8 +391,8 @@ def cmd_run(args, comm) -> None:
                     mass=settings["mass"])
     writer = None
     if out_path:
-        writer = SeriesWriter(out_path, meta, columns, enabled=comm.rank == 0,
-                              resume=(series["bytes"], series["sha256"]) if series else None)
+        writer = _agreed(comm, SeriesWriter, out_path, meta, columns, enabled=comm.rank == 0,
+                         resume=(series["bytes"], series["sha256"]) if series else None)
     checkpoint = None
     if ckpt_path:
         checkpoint = CheckpointWriter(
@@ -386,7 +402,8 @@ def cmd_run(args, comm) -> None:
                                 "dof": form.dof, "series": None,
                                 "checkpoint": {"path": os.path.abspath(ckpt_path),
                                                "every": ckpt_every}},
-            series=writer)
+            series=writer,
+            last=(os.path.abspath(args.resume), resumed["step"]) if resumed else None)
     progress = Progress(nsteps, f"{args.method} {integrator} dt={dt:.3g}",
                         enabled=comm.rank == 0)
 
@@ -394,7 +411,7 @@ def cmd_run(args, comm) -> None:
 
     def on_sample(t, tip, extras, q=None):
         if writer is not None:
-            writer.write((t, *tip, *extras))
+            _agreed(comm, writer.write, (t, *tip, *extras))
         if fields is not None and count[0] % args.fields_every == 0:
             fields.write(t, q)
         count[0] += 1
@@ -404,15 +421,27 @@ def cmd_run(args, comm) -> None:
                        on_sample=on_sample if writer or fields else None, progress=progress,
                        extras=writer is not None, rho_inf=rho_inf, state=state, resume=resume,
                        checkpoint_every=ckpt_every or 0, on_checkpoint=checkpoint)
-    finally:
+    except BaseException as exc:
+        # an output that failed leaves no half-written series; anything else keeps what was
+        # computed, flushed. Collective clean-up only when every rank is here together.
         if writer is not None:
-            writer.close()
-        if fields is not None:
+            if isinstance(exc, OutputError):
+                writer.abandon()
+            else:
+                try:
+                    writer.close()
+                except OutputError:
+                    pass
+        if fields is not None and (comm.size == 1 or getattr(exc, "collective", False)):
             fields.close()
-    progress.close(f"{res.steps} steps")
+        raise
+    if writer is not None:
+        _agreed(comm, writer.close)
+    if fields is not None:
+        fields.close()
+    progress.close(f"{res.steps} steps" + (" (interrupted)" if res.interrupted else ""))
     diverged = diagnose(form, integrator, dt, res) if res.diverged else None
-    warnings = []
-    if diverged is None and integrator == "ab2":
+    if diverged is None and integrator == "ab2" and not res.interrupted:
         note = ab2_warning(form, dt, res.t)
         if note:
             warnings.append(note)
@@ -420,7 +449,7 @@ def cmd_run(args, comm) -> None:
     if rho_inf is not None:
         implicit["newton"] = res.stats
     stable_fn = getattr(form, "stable", None)     # of the equilibrium at the final speed
-    verdict = stable_fn() if callable(stable_fn) else None
+    verdict = stable_fn() if callable(stable_fn) and not res.interrupted else None
     first = resume.step if resume else 0
     ckpt_info = None if checkpoint is None else {
         "path": checkpoint.path, "every": ckpt_every, "written": checkpoint.written,
@@ -428,7 +457,7 @@ def cmd_run(args, comm) -> None:
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        integrator=integrator, dt_s=dt, **implicit, t_end_s=args.t_end, t_s=res.t,
                        steps=res.steps, tip_mm=tip_mm(res.tip), stable=verdict,
-                       diverged=diverged, warnings=warnings,
+                       diverged=diverged, interrupted=res.interrupted, warnings=warnings,
                        series=os.path.abspath(out_path) if out_path else None,
                        resumed_from_step=resume.step if resume else None,
                        checkpoint=ckpt_info,
@@ -445,6 +474,8 @@ def cmd_run(args, comm) -> None:
         st = res.stats
         text += (f"\n  generalized-alpha rho_inf {rho_inf:g}: {st['iterations']} Newton iterations, "
                  f"{st['factorizations']} factorisations, {st['halvings']} step halvings")
+    if res.interrupted:
+        text += f"\n  INTERRUPTED: the deflection above is the last checked, t={res.t:.6g} s"
     if diverged:
         text += (f"\n  STOPPED at t={diverged['time_s']:.6g} s: {diverged['cause']} -- "
                  f"{diverged['detail']}\n  (deflection above: the last finite check, "
@@ -456,6 +487,24 @@ def cmd_run(args, comm) -> None:
     if checkpoint is not None:
         text += f"\n  checkpoints: {checkpoint.written} written to {checkpoint.path}"
     _emit(comm, args, payload, text)
+    if res.interrupted:
+        raise SystemExit(EXIT_INTERRUPT)
+
+
+def _agreed(comm, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` on every rank, where only rank 0 may fail (it writes): an
+    OutputError there is raised on every rank, so that none waits in the next collective."""
+    error = None
+    result = None
+    try:
+        result = fn(*args, **kwargs)
+    except OutputError as exc:
+        error = str(exc)
+    if comm.size > 1:
+        error = comm.bcast(error, root=0)
+    if error:
+        raise OutputError(error, collective=True)
+    return result
 
 
 def cmd_modes(args, comm) -> None:
@@ -467,7 +516,8 @@ def cmd_modes(args, comm) -> None:
     check_options(args.method, options)
     if args.n < 1:
         raise FxflexError(f"--n: must be >= 1, got {args.n}")
-    out_dir = args.out or ("out/modes" if args.campbell else None)
+    out_dir = args.out if args.out is not None else ("out/modes" if args.campbell else None)
+    check_paths(comm, [Output("--out", out_dir, folder=True)])
     payload, text = run_modes(args.method, scene, comm, options, args.n, args.campbell,
                               os.path.abspath(out_dir) if out_dir else None)
     _emit(comm, args, payload, text)
@@ -494,12 +544,20 @@ def cmd_bench(args, comm) -> None:
             raise FxflexError(f"bench: {args.name} is not implemented yet") from None
         raise
     out_dir = os.path.abspath(os.path.join(args.out, args.name))
-    if comm.rank == 0:
-        os.makedirs(out_dir, exist_ok=True)
-    comm.Barrier()
+    check_paths(comm, [Output("--out", out_dir, folder=True)])
+    _agreed(comm, _makedirs, "--out", out_dir, comm.rank == 0)
     result = module.run(scene, out_dir, comm, quick=args.quick, **options)
     payload = envelope(scene, bench=args.name, out_dir=out_dir, **result)
     _emit(comm, args, payload, result.get("summary", f"bench {args.name}: see {out_dir}"))
+
+
+def _makedirs(flag: str, path: str, enabled: bool) -> None:
+    if not enabled:
+        return
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{flag}: cannot create {path}: {exc.strerror or exc}") from None
 
 
 def cmd_compare(args, comm) -> None:
@@ -507,9 +565,8 @@ def cmd_compare(args, comm) -> None:
     from fxflex.io import envelope
 
     scene = _scene_from_args(args)
+    check_paths(comm, [Output("--out", args.out, folder=True)])
     out_dir = os.path.abspath(args.out)
-    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
-        raise FxflexError(f"--out: {out_dir} exists and is not a directory")
     if comm.rank == 0:
         sys.stderr.write(f"fxflex compare: {', '.join(args.methods)}"
                          f"{' (--full)' if args.full else ''}; results into {out_dir}\n")
@@ -576,30 +633,78 @@ def _quiet_logs() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    # Open MPI's banner on MPI_Abort (ten lines around our one) is a help message of the
+    # aborting process; quiet mode, read at MPI initialisation, keeps it out
+    os.environ.setdefault("OMPI_MCA_orte_execute_quiet", "1")
     _quiet_logs()
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
+    agree = comm.Dup() if comm.size > 1 else None
     try:
         args = make_parser().parse_args(argv)
         COMMANDS[args.command](args, comm)
-    except FxflexError as exc:
-        if comm.rank == 0:
-            sys.stderr.write(f"fxflex: error: {exc}\n")
-        return 2
     except SystemExit as exc:       # --help, --version, or a command's own status
-        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
-    except MemoryError:
-        if comm.rank == 0:
-            sys.stderr.write("fxflex: error: out of memory: the scene's mesh or model is too "
-                             "large for this machine (reduce mesh.solid, mesh.beam_elements or "
-                             "the number of modes)\n")
-        return 2
-    except KeyboardInterrupt:
-        if comm.rank == 0:
-            sys.stderr.write("\nfxflex: interrupted\n")
-        return 130
+        status = int(exc.code or 0) if not isinstance(exc.code, str) else EXIT_INPUT
+        return _fail(comm, agree, None, status) if status else 0
+    except BaseException as exc:
+        return _fail(comm, agree, *_describe(exc))
+    finally:
+        if agree is not None:
+            agree.Free()
     return 0
+
+
+def _describe(exc: BaseException) -> tuple[str, int]:
+    """The one line an exception is reported with, and the exit status."""
+    if isinstance(exc, FxflexError):
+        return f"fxflex: error: {exc}", exc.status
+    if isinstance(exc, KeyboardInterrupt):
+        return "fxflex: interrupted", EXIT_INTERRUPT
+    if isinstance(exc, MemoryError):
+        return ("fxflex: error: out of memory: the scene's mesh or model is too large for this "
+                "machine (reduce mesh.solid, mesh.beam_elements or the number of modes)",
+                EXIT_INPUT)
+    if isinstance(exc, OSError) and exc.filename:
+        return f"fxflex: error: {exc.filename}: {exc.strerror or exc}", EXIT_FAILURE
+    if os.environ.get("FXFLEX_TRACEBACK"):
+        traceback.print_exception(type(exc), exc, exc.__traceback__)
+    return (f"fxflex: error: unexpected {type(exc).__name__}: {exc} (FXFLEX_TRACEBACK=1 shows "
+            "where)", EXIT_FAILURE)
+
+
+def _fail(comm, agree, line: str | None, status: int) -> int:
+    """Report an error once and end every rank with ``status``.
+
+    Serially: print ``line``, return ``status``. Under MPI the failing ranks meet in a
+    non-blocking barrier on their own communicator (``agree``): when every rank arrives within
+    ``AGREE_S`` the error was collective (bad input every rank found, an output failure that was
+    broadcast) and rank 0 reports it; a rank still alone after that is the only one that failed
+    while the others wait in a collective for it, and reports it itself. The reporting rank
+    prints the line and ends the job with MPI_Abort: unlike ranks leaving with a non-zero status,
+    which mpirun follows with two banners, an abort in quiet mode adds nothing to the line."""
+    if agree is None:
+        _print(line)
+        return status
+    request = agree.Ibarrier()
+    deadline = time.monotonic() + AGREE_S
+    alone = False
+    while not request.Test():
+        if time.monotonic() > deadline:
+            alone = True
+            break
+        time.sleep(0.005)
+    if alone or comm.rank == 0:
+        _print(line)
+        comm.Abort(status)
+    agree.Barrier()                 # rank 0 aborts the job meanwhile
+    return status
+
+
+def _print(line: str | None) -> None:
+    if line:
+        sys.stderr.write(line + "\n")
+        sys.stderr.flush()
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -21,6 +21,11 @@ scattered back by the same rule on resume. The file therefore does not depend on
 a run checkpointed on 2 ranks can continue on 1 or 4. It continues bit for bit only on the same
 rank count (the assembly order follows the partition); on another it agrees to round-off.
 Replicated formulations (every other method) store their arrays as they are.
+
+A checkpoint that cannot be written (disk full, the folder made read-only during the run) stops
+the run on every rank with an :class:`~fxflex.errors.OutputError` naming the last good one;
+``--resume`` refuses, with one line, a file that is not a whole checkpoint (truncated, not a zip,
+meta missing) and a state holding NaN or inf, which no run could continue from.
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ import time
 import numpy as np
 
 from fxflex import __version__
-from fxflex.errors import FxflexError
+from fxflex.errors import FxflexError, OutputError
 
 __all__ = ["Layout", "CheckpointWriter", "load_checkpoint", "check_settings", "FORMAT"]
 
@@ -99,30 +104,61 @@ class CheckpointWriter:
     """``on_checkpoint`` callback of :func:`fxflex.time.simulate`: writes ``path`` atomically
     every call; collective (all ranks gather, rank 0 writes)."""
 
-    def __init__(self, path: str, layout: Layout, meta: dict, series=None):
+    def __init__(self, path: str, layout: Layout, meta: dict, series=None,
+                 last: tuple[str, int] | None = None):
         self.path = os.path.abspath(path)
         self.layout = layout
         self.meta = dict(meta)
         self.series = series
         self.written = 0
         self.seconds = 0.0
+        self.last = last            # (path, step) of the last good checkpoint of this run
+
+    def _time(self, step: int) -> float:
+        return self.meta["settings"]["t0_s"] + step * self.meta["settings"]["dt_s"]
 
     def __call__(self, step: int, q, v, arrays: dict, samples: int) -> None:
         t0 = time.perf_counter()
         glob = {"q": self.layout.gather(q), "v": self.layout.gather(v)}
         for name, arr in arrays.items():
             glob[f"scheme/{name}"] = self.layout.gather(arr)
-        if self.layout.comm.rank == 0:
-            meta = dict(self.meta, step=int(step), samples=int(samples),
-                        t_s=self.meta["settings"]["t0_s"] + step * self.meta["settings"]["dt_s"],
-                        written_at=time.strftime("%Y-%m-%d %H:%M:%S"))
+        comm = self.layout.comm
+        error = None
+        if comm.rank == 0:
+            error = self._write(step, samples, glob)
+        error = comm.bcast(error, root=0)
+        if error:
+            raise OutputError(error, collective=True)
+        self.last = (self.path, int(step))
+        self.written += 1
+        self.seconds += time.perf_counter() - t0
+
+
+    def _write(self, step: int, samples: int, glob: dict) -> str | None:
+        """Rank 0: write the checkpoint of ``step``; the error message if it failed."""
+        meta = dict(self.meta, step=int(step), samples=int(samples), t_s=self._time(step),
+                    written_at=time.strftime("%Y-%m-%d %H:%M:%S"))
+        try:
             if self.series is not None:
                 size, digest = self.series.sync()
                 meta["series"] = {"path": os.path.abspath(self.series.path), "bytes": size,
                                   "sha256": digest}
             _write_atomic(self.path, meta, glob)
-        self.written += 1
-        self.seconds += time.perf_counter() - t0
+        except OutputError as exc:
+            return f"{exc}; the run stopped at step {step} (t={self._time(step):.6g} s)"
+        except OSError as exc:
+            if self.last is None:
+                last = "no checkpoint of this run was written"
+            else:
+                path, at = self.last
+                last = (f"the last good checkpoint is {path} at step {at} "
+                        f"(t={self._time(at):.6g} s): continue with --resume {path}")
+            done = f"; {self.series.abandon()}" if self.series is not None else ""
+            return (f"--checkpoint: cannot write {self.path}: {exc.strerror or exc}; the run "
+                    f"stopped at step {step} (t={self._time(step):.6g} s); {last}{done}")
+        if self.series is not None:
+            self.series.keep(size)
+        return None
 
 
 def _write_atomic(path: str, meta: dict, arrays: dict) -> None:
@@ -151,20 +187,47 @@ def load_checkpoint(path: str, comm) -> tuple[dict, dict | None]:
     meta = arrays = error = None
     if comm.rank == 0:
         try:
-            with np.load(path, allow_pickle=False) as data:
-                meta = json.loads(str(data["meta"]))
-                arrays = {k: data[k] for k in data.files if k != "meta"}
-            if meta.get("format") != FORMAT:
-                error = (f"--resume: {path} is not an fxflex checkpoint (format "
-                         f"{meta.get('format')!r}, expected {FORMAT!r})")
+            meta, arrays = _read(path)
+            error = _problem(meta, arrays, path)
         except FileNotFoundError:
             error = f"--resume: file not found: {path}"
-        except (OSError, ValueError, KeyError) as exc:
-            error = f"--resume: {path} is not a readable fxflex checkpoint ({exc})"
+        except IsADirectoryError:
+            error = f"--resume: {path} is a directory; allowed: a checkpoint file"
+        except Exception as exc:        # zip, zlib, numpy and JSON each raise their own
+            error = (f"--resume: {path} is not a readable fxflex checkpoint (truncated or "
+                     f"another kind of file: {type(exc).__name__}: {exc})")
     error = comm.bcast(error, root=0)
     if error:
         raise FxflexError(error)
     return comm.bcast(meta, root=0), arrays
+
+
+#: what every checkpoint's meta holds (FORMAT)
+_META_KEYS = ("scene", "scene_hash", "settings", "step", "samples", "checkpoint", "series")
+
+
+def _read(path: str) -> tuple[dict, dict]:
+    with np.load(path, allow_pickle=False) as data:
+        meta = json.loads(str(data["meta"]))
+        arrays = {k: data[k] for k in data.files if k != "meta"}
+    return meta, arrays
+
+
+def _problem(meta, arrays: dict, path: str) -> str | None:
+    """Why a readable npz is no checkpoint to continue from, or None."""
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        found = meta.get("format") if isinstance(meta, dict) else None
+        return (f"--resume: {path} is not an fxflex checkpoint (format {found!r}, expected "
+                f"{FORMAT!r})")
+    missing = [k for k in _META_KEYS if k not in meta] + [k for k in ("q", "v") if k not in arrays]
+    if missing:
+        return f"--resume: {path} is an incomplete checkpoint (no {', '.join(missing)})"
+    bad = [k for k, a in arrays.items()
+           if not (np.issubdtype(a.dtype, np.number) and np.all(np.isfinite(a)))]
+    if bad:
+        return (f"--resume: {path} holds NaN or inf in {', '.join(bad)}: no run can continue "
+                "from that state; resume from an earlier checkpoint or start again")
+    return None
 
 
 def _first_difference(a, b, prefix: str = "") -> str | None:

@@ -17,6 +17,14 @@ result then carries the last finite deflection. The deflection magnitude at the 
 ``GROWTH_POINTS`` checks is kept (in a preallocated ring) so that the diagnosis can measure the
 growth rate of a divergence.
 
+A checkpoint is written only after its step passed these checks, so no checkpoint holds a NaN.
+An interrupt (Ctrl-C, SIGINT) in a run on one process ends the loop like a divergence: the result
+carries the last checked deflection and ``interrupted``; on several ranks it propagates (each
+rank may be at a different step, so none can report a common state).
+
+The step must divide the time span (``t_end - t0``) so that the run ends at t_end:
+:func:`step_to_end` gives the largest such step not above the one asked for.
+
 Resuming: ``resume`` restarts the loop at step ``Resume.step`` from the state and the scheme's
 history that ``on_checkpoint`` was given at that step. Times are ``t0 + k dt`` with the global
 step index k in both runs, so a resumed run takes bit for bit the steps of an uninterrupted one.
@@ -33,7 +41,7 @@ import numpy as np
 from fxflex.time.implicit import NewtonFailure
 from fxflex.time.schemes import make_scheme
 
-__all__ = ["RunResult", "Resume", "simulate", "divergence_limit", "GROWTH_POINTS",
+__all__ = ["RunResult", "Resume", "simulate", "divergence_limit", "step_to_end", "GROWTH_POINTS",
            "SMALL_DEFORMATION_RANGE"]
 
 #: deflections checked for the measured growth rate of a divergence
@@ -53,6 +61,7 @@ class RunResult:
     history: list = field(default_factory=list)   # (t, tip..., extras...) rows when keep_history
     growth: np.ndarray | None = None  # (m, 2) rows (t, max |tip|) of the last checks, oldest first
     stats: dict = field(default_factory=dict)     # the scheme's counters (implicit: Newton)
+    interrupted: bool = False        # stopped by SIGINT at step ``steps`` (one process only)
 
 
 @dataclass
@@ -73,6 +82,18 @@ def divergence_limit(form) -> float:
     return getattr(form, "deflection_range", SMALL_DEFORMATION_RANGE) * form.scene.geometry.length
 
 
+def step_to_end(span: float, dt: float, rtol: float = 1e-9) -> tuple[float, int]:
+    """(step, count): ``dt`` itself when a whole number of steps spans ``span`` (to ``rtol``:
+    0.01 / 1e-5 is 999.9999999999999 in floating point), else the largest step below it that
+    does, span / ceil(span / dt), so that the run ends exactly at its end time."""
+    ratio = span / dt
+    count = max(round(ratio), 1)
+    if abs(count - ratio) <= rtol * max(ratio, 1.0):
+        return dt, count
+    count = math.ceil(ratio)
+    return span / count, count
+
+
 def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: int = 1,
              on_sample=None, progress=None, limit: float | None = None, keep_history=False,
              t0: float = 0.0, state: tuple[np.ndarray, np.ndarray] | None = None,
@@ -87,8 +108,10 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
     them: ``extras`` is true and there is an ``on_sample`` or a history; else the callback gets ().
     ``rho_inf`` and ``scheme_options`` (tol, max_iter, max_halvings) configure
     ``generalized-alpha``. on_checkpoint(step, q, v, arrays, samples) is called every
-    ``checkpoint_every`` steps (not at the last), after that step's sample. With ``resume`` the
-    loop continues after step ``resume.step`` from ``state``.
+    ``checkpoint_every`` steps (not at the last), after that step's sample and checks. With
+    ``resume`` the loop continues after step ``resume.step`` from ``state``, which must be
+    finite. ``t_end - t0`` should be a whole number of steps (:func:`step_to_end`); otherwise the
+    run ends at the nearest multiple.
     """
     if dt <= 0 or not math.isfinite(dt):
         raise ValueError("dt must be positive")
@@ -108,6 +131,7 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
     counters = {"checks": 0, "samples": 0 if resume is None else resume.samples}
     last = {"t": t0}
     diverged = None
+    interrupted = False
 
     def check(k: int, sample_now: bool, t: float | None = None) -> dict | None:
         """Check the state at step k (or time t) and write its sample; the reason if it
@@ -164,37 +188,46 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
             k = resume.step
             last["t"] = t0 + k * dt
             last_tip[:] = form.tip(last["t"], q)
+            if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))
+                    and np.all(np.isfinite(last_tip))):
+                raise ValueError("simulate: the state to resume from holds NaN or inf")
             scheme.resume(form, t0 + k * dt, dt, q, v, resume.arrays)
             fresh = False                 # step k was checked and sampled before the checkpoint
         check_every = max(1, min(sample_every, 100))
-        while diverged is None:
-            final = k >= nsteps
-            if fresh:
-                sample_now = final or k % sample_every == 0
-                if sample_now or k % check_every == 0:
-                    diverged = check(k, sample_now)
-                    if diverged is not None:
-                        break
-                    if progress is not None:
-                        progress.update(k, f"t={t0 + k * dt:.4g} s")
-                if (checkpoint_every and on_checkpoint is not None and not final
-                        and k % checkpoint_every == 0):
-                    on_checkpoint(k, q, v, scheme.state_arrays(), counters["samples"])
-            fresh = True
-            if final:
-                break
-            try:
-                scheme.step(form, t0 + k * dt, dt, q, v)
-            except NewtonFailure as exc:
-                diverged = _newton_stop(exc, check, last, k)
-                break
-            k += 1
+        try:
+            while diverged is None:
+                final = k >= nsteps
+                if fresh:
+                    sample_now = final or k % sample_every == 0
+                    save = (checkpoint_every and on_checkpoint is not None and not final
+                            and k % checkpoint_every == 0)
+                    if sample_now or save or k % check_every == 0:
+                        diverged = check(k, sample_now)
+                        if diverged is not None:
+                            break
+                        if progress is not None:
+                            progress.update(k, f"t={t0 + k * dt:.4g} s")
+                    if save:
+                        on_checkpoint(k, q, v, scheme.state_arrays(), counters["samples"])
+                fresh = True
+                if final:
+                    break
+                try:
+                    scheme.step(form, t0 + k * dt, dt, q, v)
+                except NewtonFailure as exc:
+                    diverged = _newton_stop(exc, check, last, k)
+                    break
+                k += 1
+        except KeyboardInterrupt:
+            if distributed:
+                raise
+            interrupted = True
     wall = time.perf_counter() - wall0
     n = min(counters["checks"], GROWTH_POINTS)
     order = (np.arange(counters["checks"] - n, counters["checks"]) % GROWTH_POINTS)
     return RunResult(t=last["t"], steps=k, tip=last_tip.copy(), diverged=diverged, wall_s=wall,
                      samples=counters["samples"], history=history, growth=ring[order].copy(),
-                     stats=dict(getattr(scheme, "stats", {})))
+                     stats=dict(getattr(scheme, "stats", {})), interrupted=interrupted)
 
 
 def _newton_stop(exc: NewtonFailure, check, last: dict, k: int) -> dict:
