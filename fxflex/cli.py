@@ -254,9 +254,9 @@ def cmd_steady(args, comm) -> None:
     st = form.steady_state()
     t2 = time.perf_counter()
     verdict, why = stability_verdict(form, st)
-    warnings = [why] if why else []
-    if why and comm.rank == 0:
-        log.warning(why)
+    warnings = list(getattr(form, "warnings", [])) + ([why] if why else [])
+    for note in warnings if comm.rank == 0 else []:
+        log.warning(note)
     timings = {"preprocess": t1 - t0, "solve": t2 - t1}
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        tip_mm=tip_mm(st.tip), stable=verdict, converged=st.converged,

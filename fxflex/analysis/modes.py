@@ -22,6 +22,7 @@ A Campbell diagram repeats this over a range of speeds (:func:`campbell`).
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 import sys
@@ -89,13 +90,15 @@ def modes_of(form, pairs: int) -> Modes:
     from fxflex.analysis.linear import EigenNotConverged, verdict
 
     t0 = time.perf_counter()
-    warnings = []
+    warnings = list(getattr(form, "warnings", []))
     try:
         lam, X = form.rotating_modes(pairs)
     except EigenNotConverged as exc:
         lam, X = exc.eigenvalues, exc.vectors
         warnings.append(f"modes: {exc}; the {lam.size} converged are reported")
+        converged = False
     else:
+        converged = True
         if lam.size < pairs:
             warnings.append(f"--n {pairs}: {type(form).__name__.lower()} has {lam.size} modes "
                             f"(one per conjugate pair of the roots of its {form.dof} unknowns); "
@@ -103,7 +106,7 @@ def modes_of(form, pairs: int) -> Modes:
     tip = form.mode_tip(X) if lam.size else np.zeros((6, 0), dtype=complex)
     labels = direction_labels(tip, tip_radius(form.scene))
     stable, why = verdict(form)
-    if why is not None and not warnings:
+    if why is not None and converged:
         warnings.append(why)
     return Modes(rpm=form.scene.rotation.rpm, eigenvalues=lam, tip=tip, labels=labels,
                  stable=stable, seconds=time.perf_counter() - t0, warnings=warnings)
@@ -289,6 +292,13 @@ def _write_campbell(data: CampbellData, out_dir: str, payload: dict) -> dict[str
     return files
 
 
+def _log_warnings(comm, notes: list[str]) -> None:
+    """Each warning once on stderr, from rank 0 (the JSON carries them in ``warnings``)."""
+    if comm.rank == 0:
+        for note in notes:
+            logging.getLogger("fxflex").warning(note)
+
+
 def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spec: str | None,
               out_dir: str | None) -> tuple[dict, str]:
     """``fxflex modes``: (JSON payload with the envelope, human-readable text). Files go to
@@ -323,9 +333,7 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
                 f"  stable: {modes.stable}   preprocess {timings['preprocess']:.2f} s, "
                 f"steady state + eigenvalues {timings['solve']:.2f} s",
                 *(f"  WARNING: {note}" for note in modes.warnings)]
-        if comm.rank == 0:
-            for note in modes.warnings:
-                sys.stderr.write(f"fxflex: warning: {note}\n")
+        _log_warnings(comm, modes.warnings)
         if out_dir is not None and comm.rank == 0:
             import json
             os.makedirs(out_dir, exist_ok=True)
@@ -355,7 +363,9 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
         "rpm": speeds.tolist(), "frequencies_hz": [m.frequencies_hz.tolist() for m in modes],
         "growth_rates": [m.growth_rates.tolist() for m in modes],
         "labels": [m.labels for m in modes], "stable": [m.stable for m in modes],
-        "unstable_rpm": ranges}, timings_s={"total": time.perf_counter() - t0})
+        "unstable_rpm": ranges},
+        warnings=list(dict.fromkeys(w for m in modes for w in m.warnings)),
+        timings_s={"total": time.perf_counter() - t0})
     files = {}
     if comm.rank == 0:
         os.makedirs(out_dir, exist_ok=True)
@@ -366,5 +376,7 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
             f"({payload['timings_s']['total']:.1f} s)",
             "  unstable equilibrium: " + (", ".join(f"{a:g}-{b:g} rpm" for a, b in ranges)
                                           if ranges else "nowhere in the range"),
-            *(f"  {k}: {v}" for k, v in files.items())]
+            *(f"  {k}: {v}" for k, v in files.items()),
+            *(f"  WARNING: {note}" for note in payload["warnings"])]
+    _log_warnings(comm, payload["warnings"])
     return payload, "\n".join(text)
