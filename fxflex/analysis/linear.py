@@ -55,16 +55,17 @@ class EigenNotConverged(RuntimeError):
 
 
 def verdict(form, steady=None) -> tuple[bool | None, str | None]:
-    """(stable, warning): the formulation's ``stable()`` when it has one and its eigensolver
-    decides, else None with the reason. A steady state that converged is kept whatever the
-    eigensolver does: ``stable`` is null until the modal analysis exists (SPEC section 8)."""
+    """(stable, warning): the formulation's ``stable()`` (True, False, or None when its
+    eigenvalues cannot decide, the reason then in ``form.stability_note``), or (None, None)
+    without one. A steady state that converged is kept whatever the eigensolver does: ``stable``
+    is null until the modal analysis exists (SPEC section 8)."""
     stable = getattr(form, "stable", None)
     if not callable(stable):
         return None, None
-    try:
-        return bool(stable(steady) if steady is not None else stable()), None
-    except EigenNotConverged as exc:
-        return None, f"stability not decided: {exc}"
+    result = stable(steady) if steady is not None else stable()
+    if result is None:
+        return None, getattr(form, "stability_note", None) or "stability not decided"
+    return bool(result), None
 
 
 def companion(M: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -193,6 +194,7 @@ class DenseStability:
     eigenvalues are computed once)."""
 
     _eigen: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    stability_note: str | None = None
 
     def linearise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise NotImplementedError
@@ -220,8 +222,22 @@ class DenseStability:
         """(Re lambda, |Im lambda|) of the rightmost root (1/s, rad/s)."""
         return rightmost(self.eigenvalues())
 
-    def stable(self, steady=None) -> bool:
+    def stable(self, steady=None) -> bool | None:
         """No root of the linearised rotating system grows: every real part is below its own
-        error estimate (:func:`root_errors`)."""
+        error estimate (:func:`root_errors`). A positive real part within its estimate counts
+        as zero when the root itself is resolved (an undamped system's imaginary roots, real
+        parts of 1e-11 1/s); None (undecided, the reason in ``stability_note``) when such a
+        root is lost in round-off, its estimate at least its modulus (absolute damping
+        c = 1e30: the circulatory term (c/rho) Omega M_S, 6e28, buries the stiffness, 6e11,
+        below eps times it)."""
         lam, _, err = self._eigenpairs()
-        return not bool(np.any(lam.real > err))
+        if np.any(lam.real > err):
+            return False
+        lost = (lam.real > 0.0) & (err >= np.abs(lam))
+        if lost.any():
+            self.stability_note = (f"stability not decided: {int(lost.sum())} roots of the "
+                                   "linearised system with a positive real part are below its "
+                                   f"round-off (error estimate up to {err[lost].max():.3g} 1/s, "
+                                   "at least their modulus)")
+            return None
+        return True

@@ -198,6 +198,7 @@ class TLF:
         self._root: tuple | None = None
         self._steady: SteadyState | None = None
         self._modes: tuple[np.ndarray, np.ndarray | None, int] | None = None
+        self.stability_note: str | None = None
         if not options.need_steady:
             self._dyn = _Dynamics(self)
         self.timings["build"] = time.perf_counter() - t0
@@ -426,17 +427,19 @@ class TLF:
         from fxflex.analysis.linear import rightmost
         return rightmost(self.eigenvalues())
 
-    def stable(self, steady: SteadyState | None = None) -> bool:
+    def stable(self, steady: SteadyState | None = None) -> bool | None:
         """No growing root among the lowest (:func:`fxflex.analysis.linear.unstable`, with the
         PEP's own tolerance). When the PEP converged only some of them, a growing one among
-        those still decides (False); otherwise EigenNotConverged propagates: undecided."""
+        those still decides (False); otherwise None, undecided, the reason in
+        ``stability_note``."""
         from fxflex.analysis.linear import EigenNotConverged, unstable
         try:
             lam = self.eigenvalues(steady)
         except EigenNotConverged as exc:
             if exc.eigenvalues.size and unstable(exc.eigenvalues, rtol=PEP_STABILITY_RTOL):
                 return False
-            raise
+            self.stability_note = f"stability not decided: {exc}"
+            return None
         return not unstable(lam, rtol=PEP_STABILITY_RTOL)
 
     # -- pieces -----------------------------------------------------------------------------------

@@ -58,3 +58,20 @@ def test_heavy_damping_verdict_matches_the_growth_rates(capsys, c):
     assert g.max() == pytest.approx(-w * w * 7850.0 / float(c), rel=0.05)
     code, out, err = cli(capsys, "steady", "--method", "lebb", "--damping", c, "--json")
     assert code == 0 and json.loads(out)["stable"] is True
+
+
+def test_absolute_damping_that_buries_the_stiffness_is_undecided(capsys):
+    """Absolute damping c = 1e30 adds the circulatory (c/rho) Omega M_S, norm 6e28, to a
+    stiffness of norm 6e11: K_T is below eps times it and the creeping roots (1e-11 1/s, both
+    signs) are round-off. No verdict then, with the reason; the undamped model's roots on the
+    imaginary axis (real parts 1e-11 too, but resolved) stay a stable verdict."""
+    code, out, err = cli(capsys, "modes", "--method", "lebb", "--damping", "1e30",
+                         "--damping-model", "absolute", "--n", "4", "--json")
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["stable"] is None and max(d["growth_rates"]) > 0
+    assert d["warnings"][0].startswith("stability not decided: ") and "round-off" in err
+    code, out, err = cli(capsys, "modes", "--method", "lebb", "--damping", "0", "--n", "4",
+                         "--json")
+    d = json.loads(out)
+    assert d["stable"] is True and d["warnings"] == [] and max(map(abs, d["growth_rates"])) < 1e-9
