@@ -73,3 +73,19 @@ def test_campbell_speeds_pass_the_rpm_validation(capsys, tmp_path):
                          "--campbell", "59000:60000:2", "--n", "2", "--out", str(tmp_path / "o"),
                          "--json")
     assert code == 0, err
+
+
+@pytest.mark.mpi
+def test_two_ranks_keep_the_equilibrium_and_agree_on_no_verdict(capsys, pep_gives_up):
+    """Under MPI the PEP fails on every rank together (SLEPc is collective): every rank exits 0,
+    rank 0 alone prints the JSON with ``stable: null`` and the warning."""
+    from mpi4py import MPI
+
+    code, out, err = cli(capsys, "steady", "--method", "tlf", *SMALL_TLF, "--json")
+    assert code == 0
+    if MPI.COMM_WORLD.rank == 0:
+        d = json.loads(out)
+        assert d["stable"] is None and d["converged"] is True
+        assert d["warnings"][0].startswith("stability not decided: SLEPc PEP converged ")
+    else:
+        assert out == ""
