@@ -252,6 +252,7 @@ def cmd_info(args, comm) -> None:
 
 
 def cmd_steady(args, comm) -> None:
+    from fxflex.analysis.linear import verdict as stability_verdict
     from fxflex.formulation import build
     from fxflex.io import envelope, tip_mm
 
@@ -264,18 +265,21 @@ def cmd_steady(args, comm) -> None:
     t1 = time.perf_counter()
     st = form.steady_state()
     t2 = time.perf_counter()
-    stable = getattr(form, "stable", None)
-    verdict = stable(st) if callable(stable) else None
+    verdict, why = stability_verdict(form, st)
+    warnings = list(getattr(form, "warnings", [])) + ([why] if why else [])
+    for note in warnings if comm.rank == 0 else []:
+        log.warning(note)
     timings = {"preprocess": t1 - t0, "solve": t2 - t1}
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        tip_mm=tip_mm(st.tip), stable=verdict, converged=st.converged,
-                       iterations=st.iterations, timings_s=timings,
+                       iterations=st.iterations, warnings=warnings, timings_s=timings,
                        detail_timings_s={**form.timings, **st.timings}, **st.extra)
     text = (f"{args.method} steady state at {scene.rotation.rpm:g} rpm  (dof {form.dof}, "
             f"{st.iterations} iterations, {'converged' if st.converged else 'NOT converged'})\n"
             f"  tip: {_fmt_tip(tip_mm(st.tip))}\n"
             f"  stable: {verdict}   preprocess {timings['preprocess']:.2f} s, "
-            f"solve {timings['solve']:.2f} s")
+            f"solve {timings['solve']:.2f} s"
+            + "".join(f"\n  WARNING: {note}" for note in warnings))
     _emit(comm, args, payload, text)
     if not st.converged:
         raise SystemExit(1)

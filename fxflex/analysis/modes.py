@@ -21,6 +21,8 @@ A Campbell diagram repeats this over a range of speeds (:func:`campbell`).
 
 from __future__ import annotations
 
+import dataclasses
+import logging
 import math
 import os
 import sys
@@ -32,7 +34,8 @@ import numpy as np
 from fxflex.scene import Scene
 
 __all__ = ["LABELS", "Modes", "direction_labels", "tip_radius", "modes_of", "speed_builder",
-           "campbell", "CampbellData", "plot_campbell", "parse_range"]
+           "campbell", "CampbellData", "plot_campbell", "parse_range",
+           "check_speeds"]
 
 LABELS = ("axial", "in-plane", "out-of-plane", "torsion")
 
@@ -45,8 +48,9 @@ class Modes:
     eigenvalues: np.ndarray         # (k,) complex, Im >= 0
     tip: np.ndarray                 # (6, k) complex tip translation and rotation per mode
     labels: list[str]
-    stable: bool                    # the formulation's verdict (stable())
+    stable: bool | None             # the formulation's verdict (stable()); None: undecided
     seconds: float = 0.0
+    warnings: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def frequencies_hz(self) -> np.ndarray:
@@ -60,7 +64,7 @@ class Modes:
         """The SPEC section 8 fields: equal-length lists, one entry per conjugate pair."""
         return {"rpm": self.rpm, "frequencies_hz": self.frequencies_hz.tolist(),
                 "growth_rates": self.growth_rates.tolist(), "labels": list(self.labels),
-                "stable": self.stable}
+                "stable": self.stable, "warnings": list(self.warnings)}
 
 
 def direction_labels(tip: np.ndarray, radius: float) -> list[str]:
@@ -77,13 +81,35 @@ def tip_radius(scene: Scene) -> float:
 
 def modes_of(form, pairs: int) -> Modes:
     """The ``pairs`` lowest modes of a built formulation at its scene's speed. Collective for
-    TLF (every rank of its communicator must call)."""
+    TLF (every rank of its communicator must call).
+
+    Nothing computed is dropped: a model with fewer modes than ``pairs`` gives all it has (the
+    dense models every root, TLF at most ``dof`` pairs) with a warning saying so, and when the
+    eigensolver converges fewer roots than asked those it has are reported, with the verdict
+    None unless one of them grows (:func:`fxflex.analysis.linear.verdict`)."""
+    from fxflex.analysis.linear import EigenNotConverged, verdict
+
     t0 = time.perf_counter()
-    lam, X = form.rotating_modes(pairs)
-    tip = form.mode_tip(X)
+    warnings = list(getattr(form, "warnings", []))
+    try:
+        lam, X = form.rotating_modes(pairs)
+    except EigenNotConverged as exc:
+        lam, X = exc.eigenvalues, exc.vectors
+        warnings.append(f"modes: {exc}; the {lam.size} converged are reported")
+        converged = False
+    else:
+        converged = True
+        if lam.size < pairs:
+            warnings.append(f"--n {pairs}: {type(form).__name__.lower()} has {lam.size} modes "
+                            f"(one per conjugate pair of the roots of its {form.dof} unknowns); "
+                            f"all {lam.size} are reported")
+    tip = form.mode_tip(X) if lam.size else np.zeros((6, 0), dtype=complex)
     labels = direction_labels(tip, tip_radius(form.scene))
+    stable, why = verdict(form)
+    if why is not None and converged:
+        warnings.append(why)
     return Modes(rpm=form.scene.rotation.rpm, eigenvalues=lam, tip=tip, labels=labels,
-                 stable=form.stable(), seconds=time.perf_counter() - t0)
+                 stable=stable, seconds=time.perf_counter() - t0, warnings=warnings)
 
 
 def speed_builder(method: str, scene: Scene, comm, options=None):
@@ -123,6 +149,21 @@ def parse_range(text: str) -> tuple[float, float, int]:
     return lo, hi, count
 
 
+def check_speeds(scene: Scene, speeds) -> None:
+    """Each speed of a Campbell range passes the validation ``--rpm`` passes (the scene's own,
+    :func:`fxflex.scene.validate`), before anything is built; the first that fails ends with one
+    line naming ``--campbell``."""
+    from fxflex.errors import FxflexError, SceneError
+    from fxflex.scene import validate
+
+    for rpm in speeds:
+        try:
+            validate(scene.replace(**{"rotation.rpm": float(rpm)}))
+        except SceneError as exc:
+            raise FxflexError(f"--campbell: the speed {float(rpm):g} rpm is refused as "
+                              f"--rpm would be: {exc}") from None
+
+
 @dataclass
 class CampbellData:
     method: str
@@ -146,7 +187,7 @@ class CampbellData:
         """Speed intervals around the unstable samples, bounded halfway to the stable
         neighbours (the sampling's resolution)."""
         rpm = self.rpm
-        bad = [not m.stable for m in self.modes]
+        bad = [m.stable is False for m in self.modes]
         edges = np.concatenate([[rpm[0]], 0.5 * (rpm[1:] + rpm[:-1]), [rpm[-1]]])
         out = []
         for i, b in enumerate(bad):
@@ -251,6 +292,13 @@ def _write_campbell(data: CampbellData, out_dir: str, payload: dict) -> dict[str
     return files
 
 
+def _log_warnings(comm, notes: list[str]) -> None:
+    """Each warning once on stderr, from rank 0 (the JSON carries them in ``warnings``)."""
+    if comm.rank == 0:
+        for note in notes:
+            logging.getLogger("fxflex").warning(note)
+
+
 def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spec: str | None,
               out_dir: str | None) -> tuple[dict, str]:
     """``fxflex modes``: (JSON payload with the envelope, human-readable text). Files go to
@@ -266,6 +314,7 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
         except ValueError as exc:
             raise FxflexError(f"--campbell: {exc}") from None
         speeds = np.linspace(lo, hi, count)
+        check_speeds(scene, speeds)
     if out_dir is not None and os.path.exists(out_dir) and not os.path.isdir(out_dir):
         raise FxflexError(f"--out: {out_dir} exists and is not a directory")
     damping = {"c": scene.damping.c, "model": scene.damping.model}
@@ -282,7 +331,9 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
                 f"{form.dof}, damping c = {scene.damping.c:g} {scene.damping.model})",
                 *modes_table(modes),
                 f"  stable: {modes.stable}   preprocess {timings['preprocess']:.2f} s, "
-                f"steady state + eigenvalues {timings['solve']:.2f} s"]
+                f"steady state + eigenvalues {timings['solve']:.2f} s",
+                *(f"  WARNING: {note}" for note in modes.warnings)]
+        _log_warnings(comm, modes.warnings)
         if out_dir is not None and comm.rank == 0:
             import json
             os.makedirs(out_dir, exist_ok=True)
@@ -297,7 +348,8 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
             f = m.frequencies_hz
             sys.stderr.write(f"  {method} {m.rpm:8.1f} rpm ({i + 1}/{len(speeds)}): lowest "
                              f"{f[0]:.2f} Hz, max growth {m.growth_rates.max():+.4g} 1/s, "
-                             f"{'stable' if m.stable else 'UNSTABLE'}  {m.seconds:.1f} s\n")
+                             f"{ {True: 'stable', False: 'UNSTABLE'}.get(m.stable, 'undecided')}"
+                             f"  {m.seconds:.1f} s\n")
             sys.stderr.flush()
 
     if comm.rank == 0:
@@ -311,7 +363,9 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
         "rpm": speeds.tolist(), "frequencies_hz": [m.frequencies_hz.tolist() for m in modes],
         "growth_rates": [m.growth_rates.tolist() for m in modes],
         "labels": [m.labels for m in modes], "stable": [m.stable for m in modes],
-        "unstable_rpm": ranges}, timings_s={"total": time.perf_counter() - t0})
+        "unstable_rpm": ranges},
+        warnings=list(dict.fromkeys(w for m in modes for w in m.warnings)),
+        timings_s={"total": time.perf_counter() - t0})
     files = {}
     if comm.rank == 0:
         os.makedirs(out_dir, exist_ok=True)
@@ -322,5 +376,7 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
             f"({payload['timings_s']['total']:.1f} s)",
             "  unstable equilibrium: " + (", ".join(f"{a:g}-{b:g} rpm" for a, b in ranges)
                                           if ranges else "nowhere in the range"),
-            *(f"  {k}: {v}" for k, v in files.items())]
+            *(f"  {k}: {v}" for k, v in files.items()),
+            *(f"  WARNING: {note}" for note in payload["warnings"])]
+    _log_warnings(comm, payload["warnings"])
     return payload, "\n".join(text)

@@ -15,32 +15,41 @@ import numpy as np
 from petsc4py import PETSc
 from slepc4py import SLEPc
 
+from fxflex.analysis.linear import EigenNotConverged
 from fxflex.solid.petsc import make_direct
 
-__all__ = ["pep_eigen"]
+__all__ = ["pep_eigen", "TOL", "MAX_IT"]
+
+#: relative residual the PEP converges each root to, by default
+TOL = 1e-10
+#: restarts of the Krylov iteration before the PEP gives up (SLEPc's max_it)
+MAX_IT = 200
 
 
 def pep_eigen(M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, pairs: int, *, target: float = 0.0,
-              tol: float = 1e-10, vectors: bool = True
+              tol: float | None = None, vectors: bool = True
               ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """The ``pairs`` roots nearest ``target`` with Im >= 0 (one per conjugate pair), as
     (lambda (k,), X (n_local, k) complex or None, backward errors (k,)), unsorted.
 
     SLEPc returns a complex pair as two consecutive roots; ``nev`` asks for both members of each
-    pair plus a margin, so that at least ``pairs`` roots with Im >= 0 converge."""
+    pair plus a margin, so that at least ``pairs`` roots with Im >= 0 converge, and never more
+    than the 2n roots there are (n the size of the matrices). Fewer converged roots raise
+    :class:`~fxflex.analysis.linear.EigenNotConverged` carrying those that did."""
     pep = SLEPc.PEP().create(K.getComm())
     pep.setOperators([K, C, M])
     pep.setProblemType(SLEPc.PEP.ProblemType.GENERAL)
     pep.setType(SLEPc.PEP.Type.TOAR)
     pep.setScale(SLEPc.PEP.Scale.SCALAR)
-    nev = 2 * pairs + 4
-    pep.setDimensions(nev=nev, ncv=max(2 * nev, nev + 32))
+    size = 2 * K.getSize()[0]
+    nev = min(2 * pairs + 4, size)
+    pep.setDimensions(nev=nev, ncv=min(max(2 * nev, nev + 32), size))
     pep.setTarget(target)
     pep.setWhichEigenpairs(SLEPc.PEP.Which.TARGET_MAGNITUDE)
     st = pep.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
     make_direct(st.getKSP(), symmetric=False)
-    pep.setTolerances(tol, 200)
+    pep.setTolerances(TOL if tol is None else tol, MAX_IT)
     pep.solve()
     nconv = pep.getConverged()
     xr, xi = K.createVecRight(), K.createVecRight()
@@ -56,7 +65,8 @@ def pep_eigen(M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, pairs: int, *, target: f
     pep.destroy()
     xr.destroy()
     xi.destroy()
+    X = np.column_stack(cols) if vectors and cols else None
     if len(lam) < pairs:
-        raise RuntimeError(f"SLEPc PEP converged {len(lam)} of {pairs} eigenvalue pairs")
-    X = np.column_stack(cols) if vectors else None
+        raise EigenNotConverged(f"SLEPc PEP converged {len(lam)} of {pairs} eigenvalue pairs",
+                                np.array(lam, dtype=complex), X)
     return np.array(lam), X, np.array(errors)

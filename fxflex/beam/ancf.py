@@ -31,7 +31,7 @@ from scipy.sparse import _sparsetools
 from fxflex.beam.elements import ANCF_SLOTS, ancf_tables, gauss
 from fxflex.analysis.linear import DenseStability
 from fxflex.beam.invariants import GramChain, _matvec
-from fxflex.beam.line import beam_line
+from fxflex.beam.line import beam_line, twist_check
 from fxflex.beam.linear import DenseLU, newton, omega_max
 from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
 from fxflex.scene import Drive, Scene
@@ -116,6 +116,7 @@ class ANCF(DenseStability):
         rho = scene.material.rho
         self.c_rho = scene.damping.c / rho
         self.absolute = scene.damping.model == "absolute"
+        self.warnings = twist_check(scene, "ancf")
         g = scene.geometry
         line = self.line = beam_line(scene, QUADRATURE[0])
         n_el, n_nodes, le = line.n_el, line.n_nodes, line.le

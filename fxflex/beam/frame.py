@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 from fxflex.beam.elements import lebb_tables
-from fxflex.beam.line import beam_line
+from fxflex.beam.line import beam_line, twist_check
 from fxflex.analysis.linear import DenseStability
 from fxflex.beam.linear import DenseLU, newton, omega_max
 from fxflex.formulation import SteadyState
@@ -114,6 +114,7 @@ class FloatingFrameBeam(DenseStability):
         rho = scene.material.rho
         self.c_rho = scene.damping.c / rho
         self.absolute = scene.damping.model == "absolute"
+        self.warnings = twist_check(scene, method)
         line = self.line = beam_line(scene, QUADRATURE_POINTS)
         tab = self.tab = lebb_tables(line.xi, line.le)
         n_full = 6 * line.n_nodes

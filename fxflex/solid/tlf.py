@@ -197,7 +197,8 @@ class TLF:
         self._omega_max: float | None = None
         self._root: tuple | None = None
         self._steady: SteadyState | None = None
-        self._modes: tuple[np.ndarray, np.ndarray] | None = None
+        self._modes: tuple[np.ndarray, np.ndarray | None, int] | None = None
+        self.stability_note: str | None = None
         if not options.need_steady:
             self._dyn = _Dynamics(self)
         self.timings["build"] = time.perf_counter() - t0
@@ -381,18 +382,29 @@ class TLF:
         """The ``pairs`` lowest roots of the linearised rotating system, one per conjugate pair,
         lowest frequency first, and their mode vectors on this rank's free coordinates (SLEPc
         PEP, :mod:`fxflex.analysis.petsc`). Collective. At least STABILITY_PAIRS are computed
-        and kept, so that ``stable()`` after it costs nothing."""
-        from fxflex.analysis.linear import conjugate_pairs
+        and kept, so that ``stable()`` after it costs nothing; at most ``dof`` (the n pairs of
+        2n complex roots). When the PEP converges fewer, the ones it has are kept too and
+        :class:`~fxflex.analysis.linear.EigenNotConverged` is raised with them, now and on each
+        later call that asks for more."""
+        from fxflex.analysis.linear import EigenNotConverged, conjugate_pairs
         from fxflex.analysis.petsc import pep_eigen
 
-        if self._modes is None or self._modes[0].size < pairs:
-            count = max(pairs, STABILITY_PAIRS)
+        pairs = min(pairs, self.dof)
+        if self._modes is None or self._modes[2] < pairs:
+            count = min(max(pairs, STABILITY_PAIRS), self.dof)
             lin = self.linearise(steady)
-            lam, X, _ = pep_eigen(lin.M, lin.C, lin.K, count)
+            try:
+                lam, X, _ = pep_eigen(lin.M, lin.C, lin.K, count)
+            except EigenNotConverged as exc:
+                lam, X = exc.eigenvalues, exc.vectors
+            finally:
+                lin.destroy()
             keep = conjugate_pairs(lam)[:count]
-            lin.destroy()
-            self._modes = (lam[keep], X[:, keep])
-        lam, X = self._modes
+            self._modes = (lam[keep], X[:, keep] if X is not None else None, count)
+        lam, X, _ = self._modes
+        if lam.size < pairs:
+            raise EigenNotConverged(f"SLEPc PEP converged {lam.size} of {pairs} eigenvalue "
+                                    "pairs", lam, X)
         return lam[:pairs], X[:, :pairs]
 
     def mode_tip(self, X: np.ndarray) -> np.ndarray:
@@ -415,11 +427,20 @@ class TLF:
         from fxflex.analysis.linear import rightmost
         return rightmost(self.eigenvalues())
 
-    def stable(self, steady: SteadyState | None = None) -> bool:
+    def stable(self, steady: SteadyState | None = None) -> bool | None:
         """No growing root among the lowest (:func:`fxflex.analysis.linear.unstable`, with the
-        PEP's own tolerance)."""
-        from fxflex.analysis.linear import unstable
-        return not unstable(self.eigenvalues(steady), rtol=PEP_STABILITY_RTOL)
+        PEP's own tolerance). When the PEP converged only some of them, a growing one among
+        those still decides (False); otherwise None, undecided, the reason in
+        ``stability_note``."""
+        from fxflex.analysis.linear import EigenNotConverged, unstable
+        try:
+            lam = self.eigenvalues(steady)
+        except EigenNotConverged as exc:
+            if exc.eigenvalues.size and unstable(exc.eigenvalues, rtol=PEP_STABILITY_RTOL):
+                return False
+            self.stability_note = f"stability not decided: {exc}"
+            return None
+        return not unstable(lam, rtol=PEP_STABILITY_RTOL)
 
     # -- pieces -----------------------------------------------------------------------------------
     def internal_force(self, q: np.ndarray) -> np.ndarray:

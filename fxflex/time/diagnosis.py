@@ -115,7 +115,7 @@ def _physical(form) -> tuple[float, float, bool] | None:
         if not form.steady_state().converged:
             return None
         rate, freq = growth()
-        grows = (not stable()) if callable(stable) else rate > 0.0
+        grows = (stable() is False) if callable(stable) else rate > 0.0
     except (ValueError, np.linalg.LinAlgError, RuntimeError):
         return None
     return (rate, freq, bool(grows and rate > 0.0)) if math.isfinite(rate) else None
