@@ -286,6 +286,7 @@ def cmd_steady(args, comm) -> None:
 
 
 def cmd_run(args, comm) -> None:
+    from fxflex.analysis.linear import verdict as stability_verdict
     from fxflex.formulation import BuildOptions, build, check_options, default_integration
     from fxflex.io import Progress, SeriesWriter, envelope, tip_mm
     from fxflex.io.checkpoint import (FORMAT, CheckpointWriter, Layout, check_settings,
@@ -366,6 +367,9 @@ def cmd_run(args, comm) -> None:
                               "pass the run's series with --out")
     t0 = time.perf_counter()
     form = build(args.method, scene, comm, options)
+    for note in getattr(form, "warnings", []):
+        warnings.append(note)
+        log.warning(note)
     t_pre = time.perf_counter() - t0
     settings.update(force_eval=getattr(form, "force_eval", None),
                     mass=getattr(form, "mass_kind", None))
@@ -452,8 +456,10 @@ def cmd_run(args, comm) -> None:
             log.warning(note)
     if rho_inf is not None:
         implicit["newton"] = res.stats
-    stable_fn = getattr(form, "stable", None)     # of the equilibrium at the final speed
-    verdict = stable_fn() if callable(stable_fn) and not res.interrupted else None
+    verdict, why = (None, None) if res.interrupted else stability_verdict(form)
+    if why:                                     # of the equilibrium at the final speed
+        warnings.append(why)
+        log.warning(why)
     first = resume.step if resume else 0
     ckpt_info = None if checkpoint is None else {
         "path": checkpoint.path, "every": ckpt_every, "written": checkpoint.written,
@@ -644,6 +650,8 @@ def main(argv: list[str] | None = None) -> int:
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
+    if comm.rank != 0:              # warnings are the same on every rank: rank 0 prints them
+        logging.getLogger().handlers[0].setLevel(logging.ERROR)
     agree = comm.Dup() if comm.size > 1 else None
     try:
         args = make_parser().parse_args(argv)

@@ -405,7 +405,7 @@ class Compare:
         form = self.form(method, rpm, c, model)
         st = form.steady_state()
         stable_fn = getattr(form, "stable", None) if stability else None
-        stable = bool(stable_fn(st)) if callable(stable_fn) and st.converged else None
+        stable = stable_fn(st) if callable(stable_fn) and st.converged else None   # None: undecided
         growth_fn = getattr(form, "growth_rate", None) if stability else None
         growth = float(growth_fn()[0]) if callable(growth_fn) and st.converged else None
         sig = torque = None
