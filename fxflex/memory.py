@@ -262,6 +262,7 @@ def check(method: str, scene: Scene, comm, options: BuildOptions | None = None
         return None
     from mpi4py import MPI
 
+    comm = comm if comm is not None else MPI.COMM_SELF     # the beams' replicated builds
     node = comm.Split_type(MPI.COMM_TYPE_SHARED) if comm.size > 1 else None
     local_ranks = node.size if node is not None else 1
     if node is not None:
