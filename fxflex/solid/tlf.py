@@ -50,7 +50,7 @@ from scipy.linalg.blas import daxpy
 
 from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
 from fxflex.scene import Drive, Scene
-from fxflex.scene.kinematics import rotation_z
+from fxflex.scene.kinematics import rotation_cs, rotation_z
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel, solid_dof_count
 from fxflex.solid.petsc import direct_solver, make_direct, newton
@@ -381,13 +381,13 @@ class TLF:
                        ) -> tuple[np.ndarray, np.ndarray]:
         """The ``pairs`` lowest roots of the linearised rotating system, one per conjugate pair,
         lowest frequency first, and their mode vectors on this rank's free coordinates (SLEPc
-        PEP, :mod:`fxflex.analysis.petsc`). Collective. At least STABILITY_PAIRS are computed
+        PEP, :mod:`fxflex.numerics.petsc`). Collective. At least STABILITY_PAIRS are computed
         and kept, so that ``stable()`` after it costs nothing; at most ``dof`` (the n pairs of
         2n complex roots). When the PEP converges fewer, the ones it has are kept too and
-        :class:`~fxflex.analysis.linear.EigenNotConverged` is raised with them, now and on each
+        :class:`~fxflex.numerics.qep.EigenNotConverged` is raised with them, now and on each
         later call that asks for more."""
-        from fxflex.analysis.linear import EigenNotConverged, conjugate_pairs
-        from fxflex.analysis.petsc import pep_eigen
+        from fxflex.numerics.petsc import pep_eigen
+        from fxflex.numerics.qep import EigenNotConverged, conjugate_pairs
 
         pairs = min(pairs, self.dof)
         if self._modes is None or self._modes[2] < pairs:
@@ -424,15 +424,15 @@ class TLF:
 
     def growth_rate(self) -> tuple[float, float]:
         """(Re lambda, |Im lambda|) of the rightmost of the lowest roots (1/s, rad/s)."""
-        from fxflex.analysis.linear import rightmost
+        from fxflex.numerics.qep import rightmost
         return rightmost(self.eigenvalues())
 
     def stable(self, steady: SteadyState | None = None) -> bool | None:
-        """No growing root among the lowest (:func:`fxflex.analysis.linear.unstable`, with the
+        """No growing root among the lowest (:func:`fxflex.numerics.qep.unstable`, with the
         PEP's own tolerance). When the PEP converged only some of them, a growing one among
         those still decides (False); otherwise None, undecided, the reason in
         ``stability_note``."""
-        from fxflex.analysis.linear import EigenNotConverged, unstable
+        from fxflex.numerics.qep import EigenNotConverged, unstable
         try:
             lam = self.eigenvalues(steady)
         except EigenNotConverged as exc:
@@ -534,10 +534,7 @@ class HubTangent:
         #                                          would leave it to the next solve)
 
     def solve(self, t: float, r: np.ndarray, out: np.ndarray) -> None:
-        phi = self.drive.angle(t)
-        cs, sn = math.cos(phi), math.sin(phi)
-        A = self.rot
-        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = cs, -sn, sn, cs
+        A = rotation_z(self.drive.angle(t), self.rot)
         np.matmul(r.reshape(-1, 3), A, out=self.b_arr.reshape(-1, 3))     # A^T r per node
         self.ksp.solve(self.b, self.x)
         np.matmul(self.x_arr.reshape(-1, 3), A.T, out=out.reshape(-1, 3))  # A x per node
@@ -640,8 +637,7 @@ class _Dynamics:
         return out
 
     def set_angle(self, c: float, s: float) -> None:
-        A = self.A
-        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = c, -s, s, c
+        rotation_cs(c, s, self.A)
 
     def root_combination(self, a: float, b: float) -> np.ndarray:
         """a P x0 + b S x0 on the root coordinates (a work array)."""

@@ -136,7 +136,7 @@ def top_mode(form) -> tuple[float | None, float]:
     ``omega_max()`` (TLF: the clamped body at rest, SLEPc)."""
     import scipy.linalg as la
 
-    from fxflex.analysis.linear import DenseStability
+    from fxflex.numerics.qep import DenseStability
 
     scene = getattr(form, "scene", None)
     d = scene.damping.c / scene.material.rho if scene is not None else 0.0

@@ -1,0 +1,10 @@
+"""Shared low-level numerics of every formulation, integrator and analysis: dense LU and Newton
+with continuation (:mod:`.dense`), the quadratic eigenproblem of the linearised rotating system
+and its stability verdict (:mod:`.qep` dense, :mod:`.petsc` SLEPc), growth-rate fits and AB2's
+root (:mod:`.growth`), and the sparse kernels of the beam time loop (:mod:`.sparse`).
+
+This layer imports nothing from the formulations (solid, beam), the integrators (time), the
+analyses or the benchmarks; they all import from it.
+"""
+
+__all__ = ["dense", "growth", "petsc", "qep", "sparse"]
