@@ -32,6 +32,7 @@ from fxflex.beam.invariants import GramChain
 from fxflex.beam.line import beam_line, twist_check
 from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
 from fxflex.numerics.dense import DenseLU, newton, omega_max
+from fxflex.numerics.hub import HubFrameFactor
 from fxflex.numerics.qep import DenseStability
 from fxflex.numerics.sparse import csr_matvec_add
 from fxflex.scene import Drive, Scene
@@ -458,25 +459,23 @@ class ANCF(DenseStability):
         return self._omega_max
 
 
-class HubFrameLU:
+class HubFrameLU(HubFrameFactor):
     """Dense LU of the iteration matrix in the hub frame, S_hub = A_d^T S A_d on the free
     coordinates: solve(t, r) = A_d S_hub^-1 A_d^T r with A = A(phi(t)) per 3-vector slot."""
 
     def __init__(self, free_dofs: np.ndarray, n_full: int, drive: Drive):
-        self.free_dofs, self.drive = free_dofs, drive
-        self.lu = DenseLU(len(free_dofs))
         self._w = np.zeros(n_full)
+        super().__init__(drive, self._w, self._w)
+        self.free_dofs = free_dofs
+        self.lu = DenseLU(len(free_dofs))
         self._b, self._x = np.zeros(len(free_dofs)), np.zeros(len(free_dofs))
-        self._A = np.eye(3)
 
-    def solve(self, t: float, r: np.ndarray, out: np.ndarray) -> None:
-        A, w = rotation_z(self.drive.angle(t), self._A), self._w
-        np.matmul(r.reshape(-1, 3), A, out=w.reshape(-1, 3))          # A^T r per slot
+    def solve_hub(self) -> None:
+        w = self._w
         np.take(w, self.free_dofs, out=self._b, mode="clip")
         self.lu.solve_into(self._b, self._x)
         w.fill(0.0)
         w[self.free_dofs] = self._x
-        np.matmul(w.reshape(-1, 3), A.T, out=out.reshape(-1, 3))      # A x per slot
 
 
 def build(scene: Scene, comm, options: BuildOptions | None = None) -> ANCF:

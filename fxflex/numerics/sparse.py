@@ -1,11 +1,14 @@
 """The sparse product of the beam time loops, y += A x, without allocating.
 
-SciPy's public routes allocate: ``A @ x`` and ``A.dot(x)`` return a new array on every call (there
-is no ``out=``), which the time loop must not do (STYLE.md habit 4). The compiled kernel behind
-them, ``scipy.sparse._sparsetools``, accumulates into a given array, and is the only private SciPy
-import in fxflex: kept here, behind one function, because no public route was as fast (petsc4py's
-``Mat.multAdd`` on Vecs wrapping the same numpy buffers: figures in the issue-12 layering commit).
-Should SciPy move it, this function is the one place to change.
+SciPy's public routes allocate: ``A @ x`` and ``A.dot(x)`` return a new array on every call (no
+``out=``), which the time loop must not do (STYLE.md habit 4), and cost 1.3 to 2 times as much here. The
+compiled kernel behind them, ``scipy.sparse._sparsetools``, accumulates into a given array; it is
+the only private SciPy import in fxflex, kept behind this one function. petsc4py's
+``Mat.multAdd`` is no faster once the loop's changing buffers are placed in its Vecs
+(``placeArray``/``resetArray``: 12.9 against 12.8 us on ANCF's K_L, issue 12), would bring PETSc
+into beam runs that need only NumPy and SciPy, and cannot follow GramChain's slot matrix, whose
+values change every step, without assembling it or writing into PETSc's borrowed array. Should
+SciPy move the kernel, this function is the one place to change.
 """
 
 from __future__ import annotations

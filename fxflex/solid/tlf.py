@@ -49,6 +49,7 @@ from petsc4py import PETSc
 from scipy.linalg.blas import daxpy
 
 from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
+from fxflex.numerics.hub import HubFrameFactor
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import rotation_cs, rotation_z
 from fxflex.solid import forms
@@ -467,7 +468,7 @@ class TLF:
         return f
 
 
-class HubTangent:
+class HubTangent(HubFrameFactor):
     """The iteration matrix of implicit integration, S = m M + c C_t + k K_t, held in the hub frame.
 
     K_t = dQ_k/du + dQ_d/du and C_t = dQ_d/du' = D = (c/rho) M. The SVK force is objective,
@@ -485,7 +486,7 @@ class HubTangent:
         from dolfinx.fem.petsc import create_matrix
 
         model, d = tlf.model, tlf.dynamics
-        self.tlf, self.d, self.drive = tlf, d, tlf.drive
+        self.tlf, self.d = tlf, d
         t0 = time.perf_counter()
         self.U = fem.Function(model.V)
         self.kc = fem.Constant(model.mesh, 0.0)
@@ -499,13 +500,13 @@ class HubTangent:
         self.ksp = direct_solver(self.A)
         self.b, self.x = self.A.createVecs()
         self.b_arr, self.x_arr = self.b.getArray(), self.x.getArray()
+        super().__init__(tlf.drive, self.b_arr, self.x_arr)
         if d.mass == "lumped":
             self.diag = self.A.createVecLeft()
             self.m_free = d.m.copy()
             self.m_free[d.root] = 0.0
         self.bcs = [model.bc]
         self.Ul = self.U.x.array
-        self.rot = np.eye(3)
         tlf.timings["tangent_build"] = time.perf_counter() - t0
 
     def factorize(self, t: float, q: np.ndarray, m: float, c: float, k: float) -> None:
@@ -533,11 +534,8 @@ class HubTangent:
         self.ksp.getPC().setUp()                 # the numerical factorisation, now (KSPSetUp
         #                                          would leave it to the next solve)
 
-    def solve(self, t: float, r: np.ndarray, out: np.ndarray) -> None:
-        A = rotation_z(self.drive.angle(t), self.rot)
-        np.matmul(r.reshape(-1, 3), A, out=self.b_arr.reshape(-1, 3))     # A^T r per node
+    def solve_hub(self) -> None:
         self.ksp.solve(self.b, self.x)
-        np.matmul(self.x_arr.reshape(-1, 3), A.T, out=out.reshape(-1, 3))  # A x per node
 
 
 class FieldWriter:
