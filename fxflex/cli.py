@@ -252,7 +252,7 @@ def cmd_info(args, comm) -> None:
 
 
 def cmd_steady(args, comm) -> None:
-    from fxflex.analysis.linear import verdict as stability_verdict
+    from fxflex.numerics.qep import verdict as stability_verdict
     from fxflex.formulation import build
     from fxflex.io import envelope, tip_mm
 
@@ -286,7 +286,7 @@ def cmd_steady(args, comm) -> None:
 
 
 def cmd_run(args, comm) -> None:
-    from fxflex.analysis.linear import verdict as stability_verdict
+    from fxflex.numerics.qep import verdict as stability_verdict
     from fxflex.formulation import BuildOptions, build, check_options, default_integration
     from fxflex.io import Progress, SeriesWriter, envelope, tip_mm
     from fxflex.io.checkpoint import (FORMAT, CheckpointWriter, Layout, check_settings,

@@ -36,6 +36,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from fxflex.errors import FxflexError
+from fxflex.methods import MODULES as _MODULES
+from fxflex.methods import dof_count
 from fxflex.scene import METHODS, Scene
 
 __all__ = ["Formulation", "Implicit", "TangentFactor", "SteadyState", "BuildOptions", "build", "check_options", "dof_count",
@@ -143,10 +145,6 @@ def method_info() -> dict[str, str]:
             "ancf": "beam, absolute nodal coordinates, 2nd order (Sect. 3.3)"}
 
 
-#: where each method's ``build(scene, comm, options)`` lives; imported lazily so that beam runs
-#: never import dolfinx
-_MODULES = {"ffrf": "fxflex.solid.ffrf", "gcms": "fxflex.solid.gcms", "tlf": "fxflex.solid.tlf",
-            "lebb": "fxflex.beam.lebb", "nebb": "fxflex.beam.nebb", "ancf": "fxflex.beam.ancf"}
 
 
 #: PETSc's error code for a failed allocation (petscerror.h)
@@ -248,15 +246,3 @@ def default_integration(method: str, integrator: str | None, dt: float | None,
             raise FxflexError(f"--dt: required with --integrator {integrator} for {method} (the "
                               f"paper's step is for {paper_integrator}: {paper_dt:g} s)")
     return integrator, dt
-
-
-def dof_count(method: str, scene: Scene) -> int | None:
-    """Unknowns after constraints, without building the method (None if not yet known)."""
-    try:
-        module = importlib.import_module(_MODULES[method])
-    except ModuleNotFoundError as exc:
-        if exc.name == _MODULES[method]:
-            return None
-        raise
-    count = getattr(module, "dof_count", None)
-    return count(scene) if count is not None else None

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from fxflex.errors import FxflexError
+from fxflex.methods import dof_count
 from fxflex.scene import METHODS, Scene
 
 if TYPE_CHECKING:
@@ -94,8 +95,6 @@ def estimate(method: str, scene: Scene, ranks: int = 1, options: BuildOptions | 
         raise FxflexError(f"--method: {method!r} is not a method; allowed: {' '.join(METHODS)}")
     ranks = max(1, int(ranks))
     if method in BEAMS:
-        from fxflex.formulation import dof_count
-
         n = float(dof_count(method, scene))
         base, per_unknown, dense = BEAM[method]
         per_rank = {"base": base, "dense matrices": dense * n * n,

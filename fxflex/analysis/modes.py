@@ -2,8 +2,8 @@
 
 Each formulation offers ``rotating_modes(pairs)`` -> the lowest roots lambda of
 (lambda^2 M + lambda C + K) x = 0, one per conjugate pair, and their mode vectors (dense
-companion form for the reduced and beam models, :mod:`fxflex.analysis.linear`; SLEPc PEP for TLF,
-:mod:`fxflex.analysis.petsc`), and ``mode_tip(X)`` -> the tip section's translation and rotation in
+companion form for the reduced and beam models, :mod:`fxflex.numerics.qep`; SLEPc PEP for TLF,
+:mod:`fxflex.numerics.petsc`), and ``mode_tip(X)`` -> the tip section's translation and rotation in
 each mode. From them: the frequency |Im lambda| / 2 pi (0 for a real root), the growth rate
 Re lambda and a direction label
 
@@ -86,8 +86,8 @@ def modes_of(form, pairs: int) -> Modes:
     Nothing computed is dropped: a model with fewer modes than ``pairs`` gives all it has (the
     dense models every root, TLF at most ``dof`` pairs) with a warning saying so, and when the
     eigensolver converges fewer roots than asked those it has are reported, with the verdict
-    None unless one of them grows (:func:`fxflex.analysis.linear.verdict`)."""
-    from fxflex.analysis.linear import EigenNotConverged, verdict
+    None unless one of them grows (:func:`fxflex.numerics.qep.verdict`)."""
+    from fxflex.numerics.qep import EigenNotConverged, verdict
 
     t0 = time.perf_counter()
     warnings = list(getattr(form, "warnings", []))

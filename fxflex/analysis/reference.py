@@ -208,7 +208,7 @@ def converged_reference(scene: Scene, comm, *, speeds=PAPER_RPM, quick: bool = F
     """Compute the reference of ``scene`` at ``speeds`` (rpm): every level, the Richardson
     extrapolations and the reference with its error estimate (module docstring)."""
     from fxflex import __version__
-    from fxflex.bench.common import machine
+    from fxflex.io.machine import machine
 
     families = QUICK_FAMILIES if quick else FAMILIES
     t0 = time.perf_counter()

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
+# growth_fit's old import path kept: it lives in fxflex.numerics.growth
+from fxflex.numerics.growth import growth_fit
+
 __all__ = ["hann_mean", "growth_fit"]
 
 
@@ -15,8 +18,3 @@ def hann_mean(t: np.ndarray, y: np.ndarray) -> np.ndarray:
     w = 0.5 - 0.5 * np.cos(2 * np.pi * (t - t[0]) / (t[-1] - t[0]))
     y = np.asarray(y, float)
     return (w.reshape((-1,) + (1,) * (y.ndim - 1)) * y).sum(axis=0) / w.sum()
-
-
-def growth_fit(t: np.ndarray, amplitude: np.ndarray) -> float:
-    """Least-squares slope of log(amplitude) against t (1/s)."""
-    return float(np.polyfit(t, np.log(amplitude), 1)[0])

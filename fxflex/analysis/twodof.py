@@ -42,7 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fxflex.analysis.linear import companion_eigenvalues, unstable
+from fxflex.numerics.growth import growth_fit
+from fxflex.numerics.qep import companion_eigenvalues, unstable
 
 __all__ = ["TwoDof", "CASES", "case_systems", "eq63_roots", "integrate", "measured_growth",
            "behaviour"]
@@ -185,7 +186,7 @@ def measured_growth(history: np.ndarray) -> dict:
     k = max(1, half.sum() // 40)
     tt = t[half][: (half.sum() // k) * k].reshape(-1, k).max(axis=1)
     aa = amp[half][: (half.sum() // k) * k].reshape(-1, k).max(axis=1)
-    rate = float(np.polyfit(tt, np.log(aa), 1)[0])
+    rate = growth_fit(tt, aa)
     power = float(np.polyfit(np.log(tt), np.log(aa), 1)[0])
     factor = float(amp[half].max() / amp[~half].max())
     return {"rate": rate, "power": power, "factor": factor}

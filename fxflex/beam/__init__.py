@@ -3,7 +3,8 @@
 
 Shared pieces: basix element tables (:mod:`.elements`), the beam line and its sections
 (:mod:`.line`), the floating frame of LEBB/NEBB (:mod:`.frame`), the invariant-matrix engine of the
-nonlinear forces (:mod:`.invariants`) and small dense linear algebra (:mod:`.linear`).
+nonlinear forces (:mod:`.invariants`); the dense linear algebra is :mod:`fxflex.numerics.dense`
+(:mod:`.linear` keeps the old import path).
 """
 
 __all__ = ["ancf", "elements", "frame", "invariants", "lebb", "line", "linear", "nebb"]

@@ -26,14 +26,15 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import _sparsetools
 
 from fxflex.beam.elements import ANCF_SLOTS, ancf_tables, gauss
-from fxflex.analysis.linear import DenseStability
-from fxflex.beam.invariants import GramChain, _matvec
+from fxflex.beam.invariants import GramChain
 from fxflex.beam.line import beam_line, twist_check
-from fxflex.beam.linear import DenseLU, newton, omega_max
 from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
+from fxflex.numerics.dense import DenseLU, newton, omega_max
+from fxflex.numerics.hub import HubFrameFactor
+from fxflex.numerics.qep import DenseStability
+from fxflex.numerics.sparse import csr_matvec_add
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
 
@@ -209,9 +210,7 @@ class ANCF(DenseStability):
     # ------------------------------------------------------------------ drive
     def _rotate(self, phi: float) -> np.ndarray:
         """A(phi) e0 for every slot into self._Ae0; returns A."""
-        c, s = math.cos(phi), math.sin(phi)
-        A = self._A
-        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = c, -s, s, c
+        A = rotation_z(phi, self._A)
         np.matmul(self.e0n.reshape(-1, 3), A.T, out=self._Ae0)
         return A
 
@@ -236,7 +235,7 @@ class ANCF(DenseStability):
     # ------------------------------------------------------------------ forces
     def add_elastic_force(self, u: np.ndarray, out: np.ndarray) -> None:
         """out += Q_k = (K_L + K_N) (e - e0) (Eq. 55/57)."""
-        _matvec(self.KL, u, out)
+        csr_matvec_add(self.KL, u, out)
         if self.force_eval == "invariant":
             self.engine.add_force_system(u, out)
         else:
@@ -284,8 +283,7 @@ class ANCF(DenseStability):
                 d3[:, 1] -= self._col
             self._Md.fill(0.0)
             Ms = self.Ms_csr
-            _sparsetools.csr_matvecs(Ms.shape[0], Ms.shape[1], 3, Ms.indptr, Ms.indices, Ms.data,
-                                     d, self._Md)
+            csr_matvec_add(Ms, d, self._Md, 3)
             self._Md *= self.c_rho
             F -= self._Md
         if not self.at_rest:                     # root acceleration (phi'' S - phi'^2 P) A e0
@@ -461,28 +459,23 @@ class ANCF(DenseStability):
         return self._omega_max
 
 
-class HubFrameLU:
+class HubFrameLU(HubFrameFactor):
     """Dense LU of the iteration matrix in the hub frame, S_hub = A_d^T S A_d on the free
     coordinates: solve(t, r) = A_d S_hub^-1 A_d^T r with A = A(phi(t)) per 3-vector slot."""
 
     def __init__(self, free_dofs: np.ndarray, n_full: int, drive: Drive):
-        self.free_dofs, self.drive = free_dofs, drive
-        self.lu = DenseLU(len(free_dofs))
         self._w = np.zeros(n_full)
+        super().__init__(drive, self._w, self._w)
+        self.free_dofs = free_dofs
+        self.lu = DenseLU(len(free_dofs))
         self._b, self._x = np.zeros(len(free_dofs)), np.zeros(len(free_dofs))
-        self._A = np.eye(3)
 
-    def solve(self, t: float, r: np.ndarray, out: np.ndarray) -> None:
-        phi = self.drive.angle(t)
-        cs, sn = math.cos(phi), math.sin(phi)
-        A, w = self._A, self._w
-        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = cs, -sn, sn, cs
-        np.matmul(r.reshape(-1, 3), A, out=w.reshape(-1, 3))          # A^T r per slot
+    def solve_hub(self) -> None:
+        w = self._w
         np.take(w, self.free_dofs, out=self._b, mode="clip")
         self.lu.solve_into(self._b, self._x)
         w.fill(0.0)
         w[self.free_dofs] = self._x
-        np.matmul(w.reshape(-1, 3), A.T, out=out.reshape(-1, 3))      # A x per slot
 
 
 def build(scene: Scene, comm, options: BuildOptions | None = None) -> ANCF:

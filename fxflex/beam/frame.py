@@ -31,9 +31,9 @@ import numpy as np
 
 from fxflex.beam.elements import lebb_tables
 from fxflex.beam.line import beam_line, twist_check
-from fxflex.analysis.linear import DenseStability
-from fxflex.beam.linear import DenseLU, newton, omega_max
 from fxflex.formulation import SteadyState
+from fxflex.numerics.dense import DenseLU, newton, omega_max
+from fxflex.numerics.qep import DenseStability
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
 

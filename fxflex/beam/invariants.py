@@ -31,7 +31,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from numpy.lib.stride_tricks import as_strided
-from scipy.sparse import _sparsetools
+
+from fxflex.numerics.sparse import csr_matvec_add
 
 __all__ = ["GramChain"]
 
@@ -72,11 +73,6 @@ class ChainBlocks:
         """y = A x (y of length n_groups r, overwritten)."""
         self.xpad[self.c:self.c + x.size] = x
         np.matmul(self.blocks, self.windows, out=y.reshape(self.n_groups, -1, 1))
-
-
-def _matvec(m: sp.csr_matrix, x: np.ndarray, y: np.ndarray) -> None:
-    """y += m x without allocating (scipy's compiled kernel)."""
-    _sparsetools.csr_matvec(m.shape[0], m.shape[1], m.indptr, m.indices, m.data, x, y)
 
 
 class GramChain:
@@ -213,12 +209,10 @@ class GramChain:
         np.take(self.s, self.smap, out=self.S.data, mode="clip")
         S = self.S
         if self.identity_slots:
-            _sparsetools.csr_matvecs(S.shape[0], S.shape[1], self.nc, S.indptr, S.indices, S.data,
-                                     B.reshape(-1), out.reshape(-1))
+            csr_matvec_add(S, B.reshape(-1), out.reshape(-1), self.nc)
         else:
             self.SB.fill(0.0)
-            _sparsetools.csr_matvecs(S.shape[0], S.shape[1], self.nc, S.indptr, S.indices, S.data,
-                                     B.reshape(-1), self.SB.reshape(-1))
+            csr_matvec_add(S, B.reshape(-1), self.SB.reshape(-1), self.nc)
             np.dot(self.Rt, self.SB.reshape(-1), out=self.tmp)
             out += self.tmp
 

@@ -24,7 +24,7 @@ Two errors, two plots, one table each:
       is within 1 % of it after T = ln(A0 / (0.01 |U_ss|)) / sigma, sigma = -Re lambda of the
       slowest root (``growth_rate()``); cost = build + T / dt steps times the cost per step
       measured in (a). **An estimate**: nobody runs the 70 s. AB2 adds to each root the growth of
-      its principal root, ln|z(h lambda)| / h (:func:`fxflex.solid.reduced.ab2_root`); where that
+      its principal root, ln|z(h lambda)| / h (:func:`fxflex.numerics.growth.ab2_root`); where that
       makes any root grow the run never settles, and the largest step that keeps the slowest
       decay within 90 % of sigma is given instead.
 
@@ -107,7 +107,7 @@ def _ab2_rate(form, dt: float, sigma: float) -> float | None:
     """Largest ln|z| / dt of AB2's principal root over the roots lambda of the linearised rotating
     system: Re lambda plus AB2's numerical growth. Dense models: every root; TLF: its highest
     frequency w_max with Re lambda = -sigma (the law of NOTES.md is this root's small-h limit)."""
-    from fxflex.solid.reduced import ab2_root
+    from fxflex.numerics.growth import ab2_root
 
     if form.method == "tlf":
         lam = np.array([complex(-sigma, form.omega_max())])

@@ -4,35 +4,15 @@ from __future__ import annotations
 
 import json
 import os
-import platform
 import subprocess
 import sys
 import time
 
+# machine's old import path kept: it lives in fxflex.io.machine
+from fxflex.io.machine import machine
 from fxflex.scene import Scene
 
 __all__ = ["machine", "scene_overrides", "child_env", "run_cli", "markdown_table", "Timer"]
-
-
-def machine() -> dict:
-    """CPU model, core count and memory, for the header of every benchmark table."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    mem = None
-    try:
-        with open("/proc/meminfo") as fh:
-            mem = round(int(fh.readline().split()[1]) / 2**20, 1)
-    except OSError:
-        pass
-    return {"cpu": cpu, "cores": os.cpu_count(), "memory_gib": mem,
-            "python": platform.python_version(), "date": time.strftime("%Y-%m-%d %H:%M")}
 
 
 def scene_overrides(scene: Scene) -> list[str]:

@@ -19,7 +19,8 @@ import time
 import numpy as np
 
 from fxflex import cache
-from fxflex.analysis.signals import growth_fit, hann_mean
+from fxflex.analysis.signals import hann_mean
+from fxflex.numerics.growth import growth_fit
 from fxflex.scene import Scene
 from fxflex.solid.family import ReducedFamily
 from fxflex.solid.ffrf import FFRF
@@ -177,7 +178,7 @@ def step_study(family: ReducedFamily, method: str, dts, t_end: float, ref_dt: fl
 def omega_for_blowup(dt: float, window: float, log_growth: float = 20.0) -> float:
     """Circular frequency of an undamped mode that AB2 at step dt amplifies by exp(log_growth)
     within ``window`` (principal root; bisection on w)."""
-    from fxflex.solid.reduced import ab2_root
+    from fxflex.numerics.growth import ab2_root
 
     lo, hi = 1.0, 10.0 / dt
     for _ in range(200):

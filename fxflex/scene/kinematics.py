@@ -13,16 +13,26 @@ import numpy as np
 
 from fxflex.scene.model import Rotation
 
-__all__ = ["Drive", "S3", "P3", "rotation_z"]
+__all__ = ["Drive", "S3", "P3", "rotation_z", "rotation_cs"]
 
 S3 = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
 P3 = np.diag([1.0, 1.0, 0.0])
 
 
-def rotation_z(phi: float) -> np.ndarray:
-    """A(phi): rotation by phi about z (paper Eq. 5)."""
-    c, s = math.cos(phi), math.sin(phi)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+def rotation_z(phi: float, out: np.ndarray | None = None) -> np.ndarray:
+    """A(phi): rotation by phi about z (paper Eq. 5); into ``out`` when given (see
+    :func:`rotation_cs`)."""
+    return rotation_cs(math.cos(phi), math.sin(phi), out)
+
+
+def rotation_cs(c: float, s: float, out: np.ndarray | None = None) -> np.ndarray:
+    """A from (cos phi, sin phi). With ``out``, a 3x3 array whose third row and column are the
+    identity's (``np.eye(3)`` or a previous result), only the xy block is written: the time loops
+    rotate preallocated arrays without allocating."""
+    if out is None:
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    out[0, 0], out[0, 1], out[1, 0], out[1, 1] = c, -s, s, c
+    return out
 
 
 class Drive:

@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fxflex.errors import FxflexError
-from fxflex.beam.linear import DenseLU
+from fxflex.numerics.dense import DenseLU
 from fxflex.formulation import BuildOptions
 from fxflex.scene import Scene
 from fxflex.scene.kinematics import P3, S3, rotation_z

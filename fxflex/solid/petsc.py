@@ -8,6 +8,8 @@ import numpy as np
 from dolfinx import fem
 from petsc4py import PETSc
 
+from fxflex.numerics.petsc import make_direct
+
 __all__ = ["direct_solver", "make_direct", "newton", "NewtonResult"]
 
 
@@ -19,16 +21,6 @@ def direct_solver(A: PETSc.Mat, *, symmetric: bool = True) -> PETSc.KSP:
     ksp = PETSc.KSP().create(A.getComm())
     ksp.setOperators(A)
     return make_direct(ksp, symmetric=symmetric)
-
-
-def make_direct(ksp: PETSc.KSP, *, symmetric: bool = True) -> PETSc.KSP:
-    """Turn ``ksp`` (e.g. a SLEPc spectral transformation's) into one MUMPS factorisation and
-    solve: LDL^T (Cholesky) when symmetric, LU otherwise."""
-    ksp.setType("preonly")
-    pc = ksp.getPC()
-    pc.setType("cholesky" if symmetric else "lu")
-    pc.setFactorSolverType("mumps")
-    return ksp
 
 
 class NewtonResult:

@@ -49,8 +49,9 @@ import numpy as np
 from mpi4py import MPI
 
 from fxflex import cache
-from fxflex.analysis.linear import DenseStability
-from fxflex.beam.linear import DenseLU
+from fxflex.numerics.dense import DenseLU
+from fxflex.numerics.growth import ab2_root
+from fxflex.numerics.qep import DenseStability
 from fxflex.formulation import SteadyState
 from fxflex.scene import Drive, Scene
 
@@ -423,13 +424,6 @@ class ReducedFormulation(DenseStability):
 
     def ramp(self, t: float) -> float:
         return self.scene.load.factor(t)
-
-
-def ab2_root(h_lambda: np.ndarray) -> np.ndarray:
-    """|z| of the principal (larger) root of AB2's characteristic equation for y' = lambda y."""
-    b = 1.0 + 1.5 * h_lambda
-    d = np.sqrt(b * b - 2.0 * h_lambda + 0j)
-    return np.maximum(np.abs(0.5 * (b + d)), np.abs(0.5 * (b - d)))
 
 
 def rotation_weights(phi: float) -> tuple[float, float, float, float]:

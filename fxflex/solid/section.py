@@ -21,6 +21,8 @@ U = A^T (x0 + u) - x0.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import ufl
 from dolfinx import fem
@@ -30,7 +32,9 @@ from petsc4py import PETSc
 
 from fxflex.mesh.solid import ROOT
 from fxflex.solid import forms
-from fxflex.solid.model import SolidModel
+
+if TYPE_CHECKING:              # SolidModel.root_section builds this class: no import back
+    from fxflex.solid.model import SolidModel
 
 __all__ = ["RootSection"]
 

@@ -49,8 +49,9 @@ from petsc4py import PETSc
 from scipy.linalg.blas import daxpy
 
 from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
+from fxflex.numerics.hub import HubFrameFactor
 from fxflex.scene import Drive, Scene
-from fxflex.scene.kinematics import rotation_z
+from fxflex.scene.kinematics import rotation_cs, rotation_z
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel, solid_dof_count
 from fxflex.solid.petsc import direct_solver, make_direct, newton
@@ -381,13 +382,13 @@ class TLF:
                        ) -> tuple[np.ndarray, np.ndarray]:
         """The ``pairs`` lowest roots of the linearised rotating system, one per conjugate pair,
         lowest frequency first, and their mode vectors on this rank's free coordinates (SLEPc
-        PEP, :mod:`fxflex.analysis.petsc`). Collective. At least STABILITY_PAIRS are computed
+        PEP, :mod:`fxflex.numerics.petsc`). Collective. At least STABILITY_PAIRS are computed
         and kept, so that ``stable()`` after it costs nothing; at most ``dof`` (the n pairs of
         2n complex roots). When the PEP converges fewer, the ones it has are kept too and
-        :class:`~fxflex.analysis.linear.EigenNotConverged` is raised with them, now and on each
+        :class:`~fxflex.numerics.qep.EigenNotConverged` is raised with them, now and on each
         later call that asks for more."""
-        from fxflex.analysis.linear import EigenNotConverged, conjugate_pairs
-        from fxflex.analysis.petsc import pep_eigen
+        from fxflex.numerics.petsc import pep_eigen
+        from fxflex.numerics.qep import EigenNotConverged, conjugate_pairs
 
         pairs = min(pairs, self.dof)
         if self._modes is None or self._modes[2] < pairs:
@@ -424,15 +425,15 @@ class TLF:
 
     def growth_rate(self) -> tuple[float, float]:
         """(Re lambda, |Im lambda|) of the rightmost of the lowest roots (1/s, rad/s)."""
-        from fxflex.analysis.linear import rightmost
+        from fxflex.numerics.qep import rightmost
         return rightmost(self.eigenvalues())
 
     def stable(self, steady: SteadyState | None = None) -> bool | None:
-        """No growing root among the lowest (:func:`fxflex.analysis.linear.unstable`, with the
+        """No growing root among the lowest (:func:`fxflex.numerics.qep.unstable`, with the
         PEP's own tolerance). When the PEP converged only some of them, a growing one among
         those still decides (False); otherwise None, undecided, the reason in
         ``stability_note``."""
-        from fxflex.analysis.linear import EigenNotConverged, unstable
+        from fxflex.numerics.qep import EigenNotConverged, unstable
         try:
             lam = self.eigenvalues(steady)
         except EigenNotConverged as exc:
@@ -467,7 +468,7 @@ class TLF:
         return f
 
 
-class HubTangent:
+class HubTangent(HubFrameFactor):
     """The iteration matrix of implicit integration, S = m M + c C_t + k K_t, held in the hub frame.
 
     K_t = dQ_k/du + dQ_d/du and C_t = dQ_d/du' = D = (c/rho) M. The SVK force is objective,
@@ -485,7 +486,7 @@ class HubTangent:
         from dolfinx.fem.petsc import create_matrix
 
         model, d = tlf.model, tlf.dynamics
-        self.tlf, self.d, self.drive = tlf, d, tlf.drive
+        self.tlf, self.d = tlf, d
         t0 = time.perf_counter()
         self.U = fem.Function(model.V)
         self.kc = fem.Constant(model.mesh, 0.0)
@@ -499,13 +500,13 @@ class HubTangent:
         self.ksp = direct_solver(self.A)
         self.b, self.x = self.A.createVecs()
         self.b_arr, self.x_arr = self.b.getArray(), self.x.getArray()
+        super().__init__(tlf.drive, self.b_arr, self.x_arr)
         if d.mass == "lumped":
             self.diag = self.A.createVecLeft()
             self.m_free = d.m.copy()
             self.m_free[d.root] = 0.0
         self.bcs = [model.bc]
         self.Ul = self.U.x.array
-        self.rot = np.eye(3)
         tlf.timings["tangent_build"] = time.perf_counter() - t0
 
     def factorize(self, t: float, q: np.ndarray, m: float, c: float, k: float) -> None:
@@ -533,14 +534,8 @@ class HubTangent:
         self.ksp.getPC().setUp()                 # the numerical factorisation, now (KSPSetUp
         #                                          would leave it to the next solve)
 
-    def solve(self, t: float, r: np.ndarray, out: np.ndarray) -> None:
-        phi = self.drive.angle(t)
-        cs, sn = math.cos(phi), math.sin(phi)
-        A = self.rot
-        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = cs, -sn, sn, cs
-        np.matmul(r.reshape(-1, 3), A, out=self.b_arr.reshape(-1, 3))     # A^T r per node
+    def solve_hub(self) -> None:
         self.ksp.solve(self.b, self.x)
-        np.matmul(self.x_arr.reshape(-1, 3), A.T, out=out.reshape(-1, 3))  # A x per node
 
 
 class FieldWriter:
@@ -640,8 +635,7 @@ class _Dynamics:
         return out
 
     def set_angle(self, c: float, s: float) -> None:
-        A = self.A
-        A[0, 0], A[0, 1], A[1, 0], A[1, 1] = c, -s, s, c
+        rotation_cs(c, s, self.A)
 
     def root_combination(self, a: float, b: float) -> np.ndarray:
         """a P x0 + b S x0 on the root coordinates (a work array)."""

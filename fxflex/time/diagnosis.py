@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from fxflex.numerics.growth import growth_fit
 from fxflex.time import stability
 from fxflex.time.driver import SMALL_DEFORMATION_RANGE
 
@@ -82,7 +83,7 @@ def deviation_growth(history, steady_tip, threshold: float = 100.0) -> tuple[flo
     late = dev > threshold * np.linalg.norm(steady_tip)
     if late.sum() < 3:
         return None, int(late.sum())
-    return float(np.polyfit(h[late, 0], np.log(dev[late]), 1)[0]), int(late.sum())
+    return growth_fit(h[late, 0], dev[late]), int(late.sum())
 
 
 def ab2_warning(form, dt: float, t: float) -> str | None:

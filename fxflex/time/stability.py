@@ -24,7 +24,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import scipy.linalg as la
 
+from fxflex.numerics.qep import DenseStability
 from fxflex.time.schemes import make_scheme
 
 __all__ = ["step_map", "amplification", "growth_rate", "critical_step", "ab2_law_rate",
@@ -134,10 +136,6 @@ def top_mode(form) -> tuple[float | None, float]:
     linearisation about the steady state where the formulation offers one (reduced models and
     beams: spin softening included, the damping and gyroscopic terms left out), otherwise
     ``omega_max()`` (TLF: the clamped body at rest, SLEPc)."""
-    import scipy.linalg as la
-
-    from fxflex.analysis.linear import DenseStability
-
     scene = getattr(form, "scene", None)
     d = scene.damping.c / scene.material.rho if scene is not None else 0.0
     if isinstance(form, DenseStability):           # dense (M, C, K); TLF's are PETSc matrices
