@@ -8,7 +8,6 @@ import pytest
 from mpi4py import MPI
 from scipy.integrate import solve_ivp
 
-from fxflex.formulation import Implicit
 from fxflex.scene import Scene
 from fxflex.time import GeneralizedAlpha, diagnose, simulate
 from fxflex.time.implicit import parameters
@@ -132,8 +131,15 @@ class Duffing:
         return np.array([q[0], 0.0, 0.0])
 
 
-def test_test_systems_offer_the_implicit_interface():
-    assert isinstance(Chain(), Implicit) and isinstance(Duffing(), Implicit)
+class Explicit(Duffing):
+    """Duffing without the tangent: a formulation that offers only the explicit interface."""
+
+    factorize = None
+
+
+def test_a_formulation_without_the_implicit_interface_is_refused():
+    with pytest.raises(TypeError, match=r"generalized-alpha: duffing does not offer factorize\(\)"):
+        simulate(Explicit(), "generalized-alpha", 0.01, 0.1, limit=10.0)
 
 
 @pytest.mark.parametrize("rho", [0.0, 0.5, 0.9, 1.0])
