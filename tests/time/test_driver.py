@@ -54,6 +54,7 @@ def test_second_order_and_history(scheme):
     for h in (1e-2, 5e-3, 2.5e-3):
         osc = Oscillator()
         res = simulate(osc, scheme, h, 5.0, keep_history=True)
+        # times are t0 + k dt (the driver), one rounding, not a sum of steps
         assert res.diverged is None and abs(res.t - 5.0) < 1e-12
         hist = np.array(res.history)
         # the largest error over the history: at a single time the leading term may vanish
