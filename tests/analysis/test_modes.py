@@ -167,7 +167,11 @@ def test_damping_models_steady_state(method):
                                    f"damping.c={c}"), COMM).steady_state().tip
     for rpm in (1000.0, 10000.0):
         base = tip("relative", 1000.0, rpm)
-        assert np.array_equal(tip("relative", 100.0, rpm), base)
+        # c does not enter the relative model's equilibrium: the same solve, bit for bit on one
+        # rank; on several, MUMPS and the reductions may sum in another order, and the steady
+        # state is then equal to ~ eps cond(K_T) (cond(K_L) = 2.3e6 on this mesh: 5e-10)
+        np.testing.assert_allclose(tip("relative", 100.0, rpm), base,
+                                   rtol=0 if COMM.size == 1 else 1e-9)
         shift = {c: tip("absolute", c, rpm) - base for c in (100.0, 1000.0)}
         assert abs(shift[1000.0][1]) > 1e-6 * abs(base[1])
         np.testing.assert_allclose(shift[1000.0], 10 * shift[100.0], rtol=2e-3,
