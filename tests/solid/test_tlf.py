@@ -6,6 +6,7 @@ is in test_tlf_mpi.py).
 """
 
 import math
+import pathlib
 
 import numpy as np
 import pytest
@@ -423,7 +424,9 @@ def test_ab2_and_cd_agree():
 
 def test_field_writer_writes_every_call(tmp_path):
     form = tlf()
-    path = tmp_path / "u.xdmf"
+    # one file for every rank: the XDMF/HDF5 writer is collective, and each rank has its own
+    # tmp_path (different names on the ranks left the collective open waiting)
+    path = pathlib.Path(COMM.bcast(str(tmp_path), root=0)) / "u.xdmf"
     writer = form.field_writer(str(path))
     q, v = form.initial_state()
     for t in (0.0, 1e-4, 2e-4):
