@@ -7,6 +7,9 @@ import sys
 
 import pytest
 
+# spawns the fxflex CLI: a child of an mpirun'd process would inherit its MPI environment
+pytestmark = pytest.mark.serial
+
 FXFLEX = [sys.executable, "-m", "fxflex"]
 LABELS = {"axial", "in-plane", "out-of-plane", "torsion"}
 

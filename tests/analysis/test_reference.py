@@ -37,6 +37,7 @@ def test_extrapolate_and_estimate_from_two_families():
     q1 = exact[None, :] * (1 - 0.5 * h[:, None] ** 2 + 0.01 * h[:, None] ** 3)
     e2, e1 = refmod.extrapolate(levels, q2), refmod.extrapolate(levels, q1)
     value, error = refmod._combine(e2, e1, q2)
+    # Richardson extrapolation of exact synthetic data: round-off of the fit
     assert np.allclose(value, exact, rtol=1e-9)
     assert all(err >= abs(v - x) for err, v, x in zip(error, value, e1["extrapolated_m"]))
     assert np.all(np.array(error) < 1e-3 * np.abs(exact))
@@ -52,6 +53,7 @@ def test_line_load_sums_to_the_total(degree):
     q, L = scene.load.line_load, scene.geometry.length
     # the root node's share q h / (2 or 6) goes into the clamp
     root_share = q * L / 8 * (0.5 if degree == 1 else 1 / 6)
+    # exact Newton-Cotes weights summed: round-off
     assert total == pytest.approx(q * L - root_share, rel=1e-12)
     local = {round(w / (q * L / 8), 12) for w in b.getArray()[2::3] if w != 0}
     weights = sorted(set().union(*COMM.allgather(local)))
@@ -117,4 +119,6 @@ def test_q2_equilibrium_does_not_depend_on_the_ranks():
     w = 5000 * math.pi / 30
     par = tlf_steady(SolidModel(s, COMM, divisions=(16, 2, 1), degree=2), w).tip
     ser = tlf_steady(SolidModel(s, MPI.COMM_SELF, divisions=(16, 2, 1), degree=2), w).tip
+    # Newton to rtol 1e-10 on both sides (quadratic: the last step leaves ~1e-12); distributed sums
+    # round differently
     assert np.allclose(par, ser, rtol=1e-9, atol=1e-15)

@@ -41,6 +41,7 @@ def deformed(form, scale=1e-3, seed=0):
 def test_invariant_tensors_reproduce_the_green_lagrange_force(form):
     e = deformed(form, 2e-2)
     direct = direct_force(form, e)
+    # the same integrals by two routes: round-off
     np.testing.assert_allclose(form.elastic_force(e), direct, rtol=0,
                                atol=1e-11 * np.abs(direct).max())
 
@@ -55,6 +56,7 @@ def test_rigid_motion_gives_zero_elastic_force(form):
         scale = np.abs(form.KL_dense @ (e - form.e0)).max()  # size of the cancelling terms
         for fe in ("invariant", "element"):
             form.force_eval = fe
+            # rigid motion has zero strain exactly: round-off of the cancelling terms
             assert np.abs(form.elastic_force(e)).max() < 1e-12 * scale
     form.force_eval = "invariant"
 
@@ -88,6 +90,7 @@ def test_reference_configuration_is_the_beam(form):
     x = form.line.x_nodes
     corner = form.e0n[:, 0] + 0.5 * g.root_y * form.e0n[:, 2] + 0.5 * g.root_z * form.e0n[:, 3]
     b, h, _ = shape.sizes(x)
+    # the same closed form evaluated twice (coordinates of order 1 m): round-off
     np.testing.assert_allclose(corner.T, shape.point(x, b / 2, h / 2), atol=1e-15)
     half = np.radians(g.twist_deg) / form.line.n_el / 2
     deficit = 1 - form.quad["dV"].sum() / shape.volume()

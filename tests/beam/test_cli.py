@@ -10,6 +10,10 @@ import pytest
 
 from fxflex.cli import main
 
+# the CLI in-process and as a child: only rank 0 prints, so the output checks are one-rank checks,
+# and a child of an mpirun'd process would inherit its MPI environment
+pytestmark = pytest.mark.serial
+
 
 def run_json(capsys, *argv):
     assert main([*argv, "--json"]) == 0

@@ -6,6 +6,9 @@ import sys
 
 import pytest
 
+# spawns the demos as processes: a child of an mpirun'd process would inherit its MPI environment
+pytestmark = pytest.mark.serial
+
 DEMOS = sorted((pathlib.Path(__file__).parents[2] / "demos").glob("beam_*.py"))
 
 

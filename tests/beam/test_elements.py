@@ -40,6 +40,7 @@ def test_hermite_and_linear_match_paper_with_derivatives():
     names = ["N2i", "N3i", "N2j", "N3j"]
     for k in range(3):
         for col, name in enumerate(names):
+            # shape functions against closed forms (sympy): round-off of polynomial evaluation
             np.testing.assert_allclose(H[k][:, col], ev(d_dX(PAPER_LEBB[name], k), XI),
                                        atol=1e-12 * LE**-k)
     for k in range(2):

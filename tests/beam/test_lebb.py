@@ -57,9 +57,16 @@ def test_element_matrices_equal_textbook(uniform, torsion):
     L = form.line.le
     for e in (0, form.line.n_el - 1):
         K = textbook_stiffness(E, G, A, Iy, Iz, J, L)
+        # element matrices by quadrature against textbook closed forms: exact up to round-off
         np.testing.assert_allclose(form.KLe[e], K, rtol=0, atol=1e-13 * np.abs(K).max())
         M = textbook_mass(rho, A, Iy, Iz, L)
         np.testing.assert_allclose(form.Me[e], M, rtol=0, atol=1e-13 * np.abs(M).max())
+
+
+def solve_tolerance(form) -> float:
+    """Relative accuracy of the steady state at rest, a direct solve with K: n eps cond(K)
+    (1.1e6 for the 10 default elements), so nodally exact means exact to that."""
+    return form.K.shape[0] * np.finfo(float).eps * np.linalg.cond(form.K)
 
 
 def test_cantilever_tip_is_nodally_exact(uniform):
@@ -69,16 +76,17 @@ def test_cantilever_tip_is_nodally_exact(uniform):
     A, Iy, _ = section(uniform)
     ref = uniform.load.line_load * uniform.geometry.length**4 / (8 * uniform.material.E * Iy)
     assert st.converged
-    assert abs(st.tip[2] / ref - 1) < 1e-10
+    assert abs(st.tip[2] / ref - 1) < solve_tolerance(form)
     assert abs(st.tip[0]) < 1e-15 and abs(st.tip[1]) < 1e-15
 
 
 def test_tip_force_cantilever(uniform):
     """A rotating-frame tip force F_Y at rest: F L^3 / (3 E I_Z), exact."""
     scene = uniform.replace(**{"load.line_load": 0.0, "load.tip_force": (0.0, 1000.0, 0.0)})
-    tip = lebb.build(scene, None).steady_state().tip
+    form = lebb.build(scene, None)
+    tip = form.steady_state().tip
     _, _, Iz = section(scene)
-    assert tip[1] == pytest.approx(1000.0 / (3 * scene.material.E * Iz), rel=1e-10)
+    assert tip[1] == pytest.approx(1000.0 / (3 * scene.material.E * Iz), rel=solve_tolerance(form))
 
 
 def test_spinning_bar_elongation(uniform):
@@ -106,11 +114,13 @@ def test_inertia_of_the_undeformed_beam(uniform):
     form = lebb.build(uniform, None)
     A, _, Iz = section(uniform)
     rho = uniform.material.rho
+    # exact quadrature of polynomials: round-off
     assert form.I0 == pytest.approx(rho * A / 3 + rho * Iz, rel=1e-12)
 
 
 def test_gyroscopic_matrix_is_skew_and_softening_symmetric(default):
     form = lebb.build(default, None)
+    # symmetry of assembled products: exact up to the order of summation
     np.testing.assert_allclose(form.G, -form.G.T, atol=1e-14 * np.abs(form.G).max())
     np.testing.assert_allclose(form.N, form.N.T, atol=1e-14 * np.abs(form.N).max())
     assert np.all(np.linalg.eigvalsh(form.N) > 0)     # the paper: M_rr6 positive definite
@@ -136,6 +146,7 @@ def test_drive_torque_at_steady_state(default, model):
 def test_relative_damping_does_not_move_the_steady_state(default):
     tips = [lebb.build(default.replace(**{"damping.c": c}), None).steady_state().tip
             for c in (100.0, 1000.0)]
+    # c does not enter the relative model's equilibrium: the same solve
     np.testing.assert_allclose(tips[0], tips[1], rtol=1e-12)
 
 

@@ -27,6 +27,7 @@ def test_invariant_and_element_forces_agree(form):
     form.engine.add_force_element(W, elem)           # element invariant matrices
     scale = np.abs(system).max()
     assert scale > 0
+    # the same force by three routes: round-off of the largest cancelling terms
     np.testing.assert_allclose(eq66, system, rtol=0, atol=1e-10 * scale)
     np.testing.assert_allclose(elem, system, rtol=0, atol=1e-10 * scale)
 

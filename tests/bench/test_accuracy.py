@@ -26,6 +26,7 @@ def test_settling_time():
 
 
 @pytest.mark.paper
+@pytest.mark.serial       # rank 0 writes the report into its own tmp_path; the checks read it
 def test_bench_accuracy_quick_writes_its_report(tmp_path):
     """The smoke study against the stored reference: every method has its paper route and a
     history study; the Q2 route brings TLF within 1 %, LEBB is within 1 % of the linear

@@ -6,6 +6,9 @@ import sys
 
 import pytest
 
+# spawns the fxflex CLI: a child of an mpirun'd process would inherit its MPI environment
+pytestmark = pytest.mark.serial
+
 
 @pytest.mark.serial
 def test_bench_paper_quick_writes_the_four_tables(tmp_path):

@@ -31,6 +31,7 @@ def test_critical_steps_match_the_one_mode_roots(lebb):
 @pytest.mark.parametrize("integrator", ["cd", "ab2"])
 def test_long_run_energy_decays_and_ab2_grows_its_top_mode(lebb, integrator):
     r = long_run(lebb, integrator, 0.4e-6, 20000)
+    # damped: the energy never exceeds its start, up to the round-off of evaluating it (~ n eps)
     assert r["stopped_at_s"] is None and r["H_max_over_ref"] < 1 + 1e-9
     assert r["H_end_over_ref"] == pytest.approx(r["H_decay_expected"], abs=1e-4)
     if integrator == "ab2":
@@ -46,6 +47,8 @@ def test_generalized_alpha_push_decays_on_a_nonlinear_model():
     and it seemed to grow 148x."""
     nebb = build("nebb", Scene(), MPI.COMM_SELF)
     ga = critical_step_study(nebb, "generalized-alpha")
+    # generalised-alpha is unconditionally stable: the spectral radius is at most 1 up to round-off
+    # of a 3 x 3 eig
     assert ga["max_radius"] <= 1.0 + 1e-12
     assert ga["trial_step"] * ga["omega_max"] == pytest.approx(20.0, rel=1e-3)
     assert ga["trial_growth"] < 0.1

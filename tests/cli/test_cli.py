@@ -9,6 +9,10 @@ import pytest
 
 from fxflex.cli import main
 
+# the CLI in-process and as a child: only rank 0 prints, so the output checks are one-rank checks,
+# and a child of an mpirun'd process would inherit its MPI environment
+pytestmark = pytest.mark.serial
+
 FXFLEX = [sys.executable, "-m", "fxflex"]
 
 

@@ -33,6 +33,7 @@ def test_counts_and_tags():
 def test_untwisted_volume_is_exact():
     g = load_scene(overrides=["geometry.twist_deg=0", "geometry.hub_radius=0.3"]).geometry
     m = build_solid_mesh(g, (7, 2, 4), COMM)
+    # an untwisted tapered body is meshed exactly: round-off of the quadrature sum only
     assert volume(m) == pytest.approx(BeamShape(g).volume(), rel=1e-12)
 
 
@@ -72,6 +73,7 @@ def test_tip_face_nodes_lie_on_the_twisted_tapered_rectangle():
     c, sn = np.cos(th), np.sin(th)
     yt, zt = c * tip[:, 1] + sn * tip[:, 2], -sn * tip[:, 1] + c * tip[:, 2]
     j, k = (yt / b + 0.5) * ny, (zt / h + 0.5) * nz
+    # gmsh places the nodes on the section's grid to its geometric tolerance (1e-9 m scale)
     assert np.allclose(j, np.round(j), atol=1e-9) and np.allclose(k, np.round(k), atol=1e-9)
     assert j.min() > -1e-9 and j.max() < ny + 1e-9 and k.min() > -1e-9 and k.max() < nz + 1e-9
     n_tip = COMM.allreduce(len({(round(a), round(bb)) for a, bb in zip(j, k)}), op=MPI.SUM)

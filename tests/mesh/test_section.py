@@ -51,6 +51,7 @@ def test_section_properties_match_mesh_sections(twist):
         x = g.length * i / 8
         p = shape.section(x)
         A, SZ, SY, IY, IZ, IYZ = layer_integrals(m, g.hub_radius + x)
+        # closed forms against exact quadrature of the same polynomial integrands: round-off only
         assert A == pytest.approx(float(p.A), rel=1e-12)
         assert abs(SY) < 1e-14 and abs(SZ) < 1e-14
         scale = float(p.J_polar)

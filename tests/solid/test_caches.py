@@ -39,7 +39,7 @@ def _variants(scene):
 
 
 @pytest.mark.serial
-def test_modes_hit_is_identical_and_every_keyed_input_misses(folder, monkeypatch):
+def test_modes_hit_is_identical_and_every_keyed_input_misses(folder, monkeypatch, eig):
     model = SolidModel(SCENE, SELF)
     a, b = clamped_modes(model, 6), clamped_modes(model, 6)
     assert not a.from_cache and b.from_cache and "eigensolve" in a.timings
@@ -60,7 +60,10 @@ def test_modes_hit_is_identical_and_every_keyed_input_misses(folder, monkeypatch
     assert base not in keys.values() and len(set(keys.values())) == len(keys)
     other = SolidModel(SCENE.replace(**{"material.E": 200e9}), SELF)
     c = clamped_modes(other, 6)
-    assert not c.from_cache and np.allclose(c.omega2, a.omega2 * 200 / 210, rtol=1e-10)
+    # K is linear in E: the eigenvalues scale by 200 / 210, each solve to its certified radius
+    assert not c.from_cache
+    assert np.all(np.abs(c.omega2 - a.omega2 * 200 / 210)
+                  <= eig.radii(other, c) + eig.radii(model, a) * 200 / 210)
 
 
 @pytest.mark.serial
@@ -77,6 +80,8 @@ def test_reduced_hit_needs_no_mesh_and_is_identical(folder, method):
     with cache.bypass():
         d = build(method, sc, SELF)
     assert "cache_load" in c.timings and "cache_load" not in d.timings
+    # a cache hit and a fresh build of the same projections: the same linear solve on matrices equal
+    # to round-off
     assert np.allclose(c.steady_state().tip, d.steady_state().tip, rtol=1e-12, atol=0)
     # what --fields needs is built on demand after a hit (the modes from their own cache)
     basis, _ = b.nodal_basis()
@@ -115,7 +120,7 @@ def test_tlf_invariants_hit_is_identical(folder):
 
 
 @pytest.mark.mpi
-def test_modes_written_on_one_rank_serve_two_and_back(folder):
+def test_modes_written_on_one_rank_serve_two_and_back(folder, eig):
     """1 rank writes, 2 ranks read (and the reverse): the rows each rank gets match a fresh
     solve on its partition to round-off."""
     if COMM.rank == 0:
@@ -128,7 +133,11 @@ def test_modes_written_on_one_rank_serve_two_and_back(folder):
     assert read.vectors.shape == fresh.vectors.shape and read.vectors.shape[0] < 3 * 9 * 3 * 3
     scale = COMM.allreduce(np.abs(fresh.vectors).max(), op=MPI.MAX)
     assert COMM.allreduce(np.abs(read.vectors - fresh.vectors).max(), op=MPI.MAX) < 1e-8 * scale
-    assert np.allclose(read.omega2, fresh.omega2, rtol=1e-10, atol=0)
+    # the cached serial solve to its certified radius (its rows whole on every rank, from the
+    # cache); the distributed one, the same algorithm and tolerance, taken to be as accurate
+    whole = SolidModel(SCENE, SELF)
+    assert np.all(np.abs(read.omega2 - fresh.omega2)
+                  <= 2 * eig.radii(whole, clamped_modes(whole, 6)))
     written = clamped_modes(model, 7)                                # written by two ranks
     assert not written.from_cache
     if COMM.rank == 0:
@@ -148,4 +157,6 @@ def test_reduced_model_written_on_one_rank_serves_two(folder):
         fresh = build("ffrf", SCENE, COMM)
     assert "cache_load" in read.timings and "cache_load" not in fresh.timings
     assert np.array_equal(read.steady_state().tip, serial)
+    # a reduced steady state from a distributed and a serial eigensolve: the modes agree to their
+    # certified radii, the projected solve to ~ n eps cond
     assert np.allclose(fresh.steady_state().tip, serial, rtol=1e-9, atol=0)

@@ -102,11 +102,15 @@ def test_mass_blocks_equal_direct_quadrature_of_eq11(tiny):
     m = inv.J0 + 2 * inv.n @ eta + eta @ inv.N @ eta
     a, b = inv.n + inv.N @ eta, inv.g + inv.G @ eta
     c, s = np.cos(phi), np.sin(phi)
+    # the same quadrature by two routes (direct UFL and the invariants): round-off relative to the
+    # block's size, ~ n eps with n ~ 1e3 terms
     assert np.allclose(M_rr, m * np.eye(2), rtol=0, atol=1e-12 * m)
     ref = np.array([c * a - s * b, c * b + s * a])
     assert np.allclose(M_rf, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
     assert np.allclose(M_ff, np.eye(10), rtol=0, atol=1e-12)
     assert np.allclose(K_ff, inv.Lambda, rtol=0, atol=1e-12 * f.modes.omega2[9])
+    # Phi^T K Phi with M-orthonormal modes: off-diagonals are the modes' residuals and round-off,
+    # bounded by the certified radii (tests/solid/conftest.py), below 1e-9 omega_10^2 on this mesh
     assert np.allclose(inv.Lambda, np.diag(f.modes.omega2[:10]), rtol=0,
                        atol=1e-9 * f.modes.omega2[9])
 
@@ -139,6 +143,8 @@ def test_quadratic_velocity_and_drive_torque_follow_from_kinetic_energy(tiny):
     acc = np.empty(10)
     f.acceleration(t, eta, deta, acc)
     # eta rows: m_pe phi'' + eta'' = Q_v - Lambda eta
+    # the same equations of motion by quadrature and by the invariants: round-off of the largest
+    # terms
     assert np.allclose(acc, Qv - Lam @ eta - m_pe * a, rtol=0, atol=1e-10 * np.abs(acc).max())
     # phi row: tau = m_pp phi'' + m_pe . eta'' + (M' q')_phi
     tau = quad.m_phiphi(eta) * a + m_pe @ acc + Mdot_phi
@@ -364,6 +370,7 @@ def test_cli_steady(small, method):
     form = small.build(method)
     assert d["dof"] == form.dof and d["stable"] is True and d["converged"] is True
     tip = np.array([d["tip_mm"][k] for k in ("longitudinal", "orthogonal", "load")]) / 1e3
+    # the same linear solve in another process; JSON carries every digit
     assert np.allclose(tip, form.steady_state().tip, rtol=1e-9, atol=0)
 
 
@@ -380,6 +387,7 @@ def test_cli_run_writes_the_drive_torque_and_diagnoses_divergence(small, tmp_pat
     assert last[0] == pytest.approx(3e-4, rel=1e-3)
     f = small.build("gcms")
     res = simulate(f, "ab2", 0.3e-6, 3e-4)
+    # the same AB2 run in another process; the CSV carries 12 significant digits
     assert np.allclose(last[1:4], res.tip, rtol=1e-9, atol=1e-15)
     d = json.loads(fxflex("run", "--method", "ffrf", "--rpm", "10000", "--t-end", "0.03",
                           "--json").stdout)
@@ -413,6 +421,7 @@ def test_field_writer_rebuilds_the_deflection(tiny, method, tmp_path):
     w.write(t, q)
     w.close()
     m = f.model
+    # the same modal sum on the nodes and at the probe: round-off
     assert np.allclose(m.tip_displacement(w.U.x.array), f.tip(t, q), rtol=1e-12, atol=1e-18)
     assert np.allclose(m.tip_displacement(w.u.x.array),
                        rotation_z(f.drive.angle(t)) @ f.tip(t, q), rtol=1e-12, atol=1e-18)

@@ -32,6 +32,7 @@ def test_line_load_is_consistent(model):
     b = model.line_load_vector()
     q, L, h = model.scene.load.line_load, model.scene.geometry.length, 0.1
     # consistent nodal forces sum to q L; the root node's share (q h / 2) goes into the clamp
+    # a sum of a few hundred exact quadrature weights: round-off ~ n eps
     assert owned_sum(b, 2) == pytest.approx(q * (L - h / 2), rel=1e-13)
     assert owned_sum(b, 0) == 0 and owned_sum(b, 1) == 0
     arr = b.getArray()
@@ -62,6 +63,7 @@ def test_tip_probe(model):
     u.interpolate(lambda x: np.vstack([x[0], 2 * x[0] + x[1], -3 * x[0] + x[2]]))
     tip = model.tip_displacement(u.x.array)
     R_L = model.scene.geometry.hub_radius + model.scene.geometry.length
+    # a linear field interpolated exactly and probed at a node: round-off only
     assert np.allclose(tip, [R_L, 2 * R_L, -3 * R_L], rtol=1e-14)
     # rigid rotation by phi: x = A x0, so the rotating-frame deflection is zero
     phi = 0.7

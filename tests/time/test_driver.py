@@ -54,6 +54,7 @@ def test_second_order_and_history(scheme):
     for h in (1e-2, 5e-3, 2.5e-3):
         osc = Oscillator()
         res = simulate(osc, scheme, h, 5.0, keep_history=True)
+        # times are t0 + k dt (the driver), one rounding, not a sum of steps
         assert res.diverged is None and abs(res.t - 5.0) < 1e-12
         hist = np.array(res.history)
         # the largest error over the history: at a single time the leading term may vanish
@@ -69,8 +70,55 @@ def test_divergence_stops_early_with_a_reason():
     assert "beyond" in res.diverged["reason"] or "non-finite" in res.diverged["reason"]
 
 
-def test_scheme_classes_are_exported():
-    assert AB2.name == "ab2" and CentralDifference.name == "cd"
+class Linear:
+    """q'' = A q + B q' on two coordinates: the schemes' steps are written out below."""
+
+    method = "linear"
+
+    def __init__(self):
+        self.A = np.array([[-4.0, 1.0], [0.5, -9.0]])
+        self.B = np.array([[-0.1, 0.02], [0.0, -0.3]])
+
+    def constrain(self, t, q, v):
+        pass
+
+    def acceleration(self, t, q, v, out):
+        out[:] = self.A @ q + self.B @ v
+
+
+def test_exported_schemes_take_the_documented_steps():
+    """AB2: a Heun start, then y_{n+1} = y_n + h (3/2 f_n - 1/2 f_{n-1}); central difference:
+    v_{1/2} = v_0 + h/2 a_0, q_{n+1} = q_n + h v_{n+1/2}, v_{n+3/2} = v_{n+1/2} + h a_{n+1}, with
+    v_{n+1} = v_{n+1/2} + h/2 a_n for the damping force. Written out here on q'' = A q + B q'; the
+    same operations in another order, so equal to a few ulps (1e-14 of the state, which is O(1))."""
+    form, h, q0, v0 = Linear(), 0.05, np.array([1.0, -0.5]), np.array([0.2, 0.3])
+
+    def f(q, v):
+        return form.A @ q + form.B @ v
+
+    q, v = q0.copy(), v0.copy()
+    ab2 = AB2()
+    ab2.start(form, 0.0, h, q, v)
+    ab2.step(form, h, h, q, v)
+    ys = [(q0, v0)]
+    qs, vs = q0 + h * v0, v0 + h * f(q0, v0)                     # Heun predictor
+    ys.append((q0 + h / 2 * (v0 + vs), v0 + h / 2 * (f(q0, v0) + f(qs, vs))))
+    (qa, va), (qb, vb) = ys
+    ys.append((qb + h * (1.5 * vb - 0.5 * va), vb + h * (1.5 * f(qb, vb) - 0.5 * f(qa, va))))
+    np.testing.assert_allclose(np.r_[q, v], np.r_[ys[2]], rtol=0, atol=1e-14)
+
+    q, v = q0.copy(), v0.copy()
+    cd = CentralDifference()
+    cd.start(form, 0.0, h, q, v)
+    cd.step(form, h, h, q, v)
+    a = f(q0, v0)
+    v_half, qn = v0 + h / 2 * a, q0.copy()
+    for _ in range(2):
+        qn = qn + h * v_half
+        vn = v_half + h / 2 * a
+        a = f(qn, vn)
+        v_half = v_half + h * a
+    np.testing.assert_allclose(np.r_[q, v], np.r_[qn, vn], rtol=0, atol=1e-14)
 
 
 class Poisoned(Oscillator):

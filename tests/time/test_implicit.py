@@ -8,7 +8,6 @@ import pytest
 from mpi4py import MPI
 from scipy.integrate import solve_ivp
 
-from fxflex.formulation import Implicit
 from fxflex.scene import Scene
 from fxflex.time import GeneralizedAlpha, diagnose, simulate
 from fxflex.time.implicit import parameters
@@ -91,6 +90,7 @@ class Chain:
             self.acceleration(t, q, v, a)
             return np.r_[y[2:], a[1:]]
         q0, v0 = self.initial_state()
+        # the reference solution, far more accurate than the errors (>= 1e-6) measured against it
         sol = solve_ivp(rhs, (0.0, times[-1]), np.r_[q0[1:], v0[1:]], method="DOP853",
                         t_eval=times, rtol=1e-12, atol=1e-14)
         return sol.y[:2].T
@@ -132,8 +132,15 @@ class Duffing:
         return np.array([q[0], 0.0, 0.0])
 
 
-def test_test_systems_offer_the_implicit_interface():
-    assert isinstance(Chain(), Implicit) and isinstance(Duffing(), Implicit)
+class Explicit(Duffing):
+    """Duffing without the tangent: a formulation that offers only the explicit interface."""
+
+    factorize = None
+
+
+def test_a_formulation_without_the_implicit_interface_is_refused():
+    with pytest.raises(TypeError, match=r"duffing does not offer factorize\(\) \(the Implicit"):
+        simulate(Explicit(), "generalized-alpha", 0.01, 0.1, limit=10.0)
 
 
 @pytest.mark.parametrize("rho", [0.0, 0.5, 0.9, 1.0])
@@ -180,6 +187,7 @@ def test_spectral_radius_is_rho_inf_at_high_frequency(rho):
     high = max(abs(np.linalg.eigvals(amplification(rho, 1e5))))
     low = max(abs(np.linalg.eigvals(amplification(rho, 1e-2))))
     assert high == pytest.approx(rho, abs=2e-3)
+    # above 1 only by the round-off of a 3 x 3 eig
     assert 1.0 - 1e-6 <= low <= 1.0 + 1e-12
     if rho < 1.0:
         mid = max(abs(np.linalg.eigvals(amplification(rho, 10.0))))
@@ -193,6 +201,7 @@ def test_second_order_on_a_linear_system_with_a_prescribed_coordinate(rho):
         form = Chain()
         res = simulate(form, "generalized-alpha", h, 4.0, keep_history=True, rho_inf=rho, limit=10.0,
                        scheme_options={"tol": 1e-10})
+        # times are t0 + k dt (the driver), one rounding, not a sum of steps
         assert res.diverged is None and abs(res.t - 4.0) < 1e-12
         hist = np.array(res.history)
         errors.append(np.max(np.abs(hist[:, 1:3] - form.exact(hist[:, 0]))))
