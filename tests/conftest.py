@@ -19,3 +19,11 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip_mpi)
         if "serial" in item.keywords and size > 1:
             item.add_marker(skip_serial)
+
+
+@pytest.fixture
+def folder(tmp_path, monkeypatch):
+    """An empty fxflex cache folder of the test's own (FXFLEX_CACHE), not bypassed."""
+    monkeypatch.setenv("FXFLEX_CACHE", str(tmp_path))
+    monkeypatch.delenv("FXFLEX_NO_CACHE", raising=False)
+    return tmp_path

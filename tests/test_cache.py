@@ -12,13 +12,6 @@ from fxflex import cache
 pytestmark = pytest.mark.serial
 
 
-@pytest.fixture
-def folder(tmp_path, monkeypatch):
-    monkeypatch.setenv("FXFLEX_CACHE", str(tmp_path))
-    monkeypatch.delenv("FXFLEX_NO_CACHE", raising=False)
-    return tmp_path
-
-
 def test_entry_round_trip_leaves_no_temporary_file(folder):
     arrays = {"a": np.arange(5.0), "b": np.array(3.5), "c": np.eye(2, dtype=bool)}
     path = cache.save("modes", "k1", arrays)

@@ -18,13 +18,6 @@ pytestmark = pytest.mark.serial
 SMALL = {"mesh.solid": (4, 2, 2), "reduction.ffrf_modes": 4, "reduction.gcms_modes": 6}
 
 
-@pytest.fixture
-def folder(tmp_path, monkeypatch):
-    monkeypatch.setenv("FXFLEX_CACHE", str(tmp_path))
-    monkeypatch.delenv("FXFLEX_NO_CACHE", raising=False)
-    return tmp_path
-
-
 def files(folder):
     """Every file in the cache folder, hidden temporary files included."""
     return sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file())
