@@ -43,6 +43,7 @@ def test_heavily_damped_roots_are_accurate():
     assert conjugate_pairs(lam).size == 6
 
 
+@pytest.mark.serial    # checks the CLI's output, which only rank 0 prints
 @pytest.mark.parametrize("c", ["1e30", "1e12"])
 def test_heavy_damping_verdict_matches_the_growth_rates(capsys, c):
     """Rotating frame, relative damping c/rho M: M > 0, K > 0 at 1000 rpm and a positive
@@ -60,6 +61,7 @@ def test_heavy_damping_verdict_matches_the_growth_rates(capsys, c):
     assert code == 0 and json.loads(out)["stable"] is True
 
 
+@pytest.mark.serial    # checks the CLI's output, which only rank 0 prints
 def test_absolute_damping_that_buries_the_stiffness_is_undecided(capsys):
     """Absolute damping c = 1e30 adds the circulatory (c/rho) Omega M_S, norm 6e28, to a
     stiffness of norm 6e11: K_T is below eps times it and the creeping roots (1e-11 1/s, both

@@ -27,6 +27,7 @@ def pep_gives_up(monkeypatch):
     monkeypatch.setattr(pep, "MAX_IT", 1)
 
 
+@pytest.mark.serial    # checks the CLI's output, which only rank 0 prints
 def test_steady_keeps_the_equilibrium_when_the_pep_does_not_converge(capsys, pep_gives_up):
     code, out, err = cli(capsys, "steady", "--method", "tlf", *SMALL_TLF, "--json")
     assert code == 0, err
@@ -39,6 +40,7 @@ def test_steady_keeps_the_equilibrium_when_the_pep_does_not_converge(capsys, pep
     assert "stability not decided" in err
 
 
+@pytest.mark.serial    # checks the CLI's output, which only rank 0 prints
 def test_modes_reports_the_roots_that_converged(capsys, pep_gives_up):
     code, out, err = cli(capsys, "modes", "--method", "tlf", *SMALL_TLF, "--n", "8", "--json")
     assert code == 0, err
@@ -48,6 +50,7 @@ def test_modes_reports_the_roots_that_converged(capsys, pep_gives_up):
     assert f"SLEPc PEP converged {d['n']} of 8" in d["warnings"][0]
 
 
+@pytest.mark.serial    # checks the CLI's output, which only rank 0 prints
 @pytest.mark.parametrize("method, args, dof", [("tlf", SMALL_TLF, 270),
                                                ("lebb", ["--set", "mesh.beam_elements=4"], 24)])
 def test_n_beyond_the_model_gives_every_mode_with_a_note(capsys, method, args, dof):
@@ -60,6 +63,7 @@ def test_n_beyond_the_model_gives_every_mode_with_a_note(capsys, method, args, d
     assert d["stable"] is True
 
 
+@pytest.mark.serial    # checks the CLI's output, which only rank 0 prints
 def test_campbell_speeds_pass_the_rpm_validation(capsys, tmp_path):
     code, out, err = cli(capsys, "modes", "--method", "lebb", "--campbell", "0:1e9:3",
                          "--out", str(tmp_path / "o"))

@@ -21,6 +21,7 @@ def cli(capsys, *args):
     return code, out, err
 
 
+@pytest.mark.serial    # checks the CLI's output, which only rank 0 prints
 @pytest.mark.parametrize("method", ["lebb", "nebb"])
 @pytest.mark.parametrize("elements, twist, need", [(4, "720", "8"), (1, "850", "10")])
 def test_too_much_twist_per_element_is_refused(capsys, tmp_path, method, elements, twist, need):
@@ -67,6 +68,7 @@ def test_ancf_estimate_bounds_its_twist_error():
         assert 0.5 * estimate < measured <= estimate, (elements, measured, estimate)
 
 
+@pytest.mark.serial    # checks the CLI's output, which only rank 0 prints
 @pytest.mark.parametrize("method, elements, twist, words", [
     ("lebb", 8, "720", ["off by up to 7.4 %", "mesh.beam_elements >= 24"]),
     ("ancf", 24, "360", ["off by up to 2.4 %", "mesh.beam_elements >= 141"])])
@@ -80,6 +82,7 @@ def test_warning_beyond_one_percent(capsys, method, elements, twist, words):
     assert "twist alone" in err
 
 
+@pytest.mark.serial    # checks the CLI's output, which only rank 0 prints
 @pytest.mark.parametrize("method", ["lebb", "ancf"])
 def test_no_warning_on_the_paper_scene(capsys, method):
     code, out, err = cli(capsys, "steady", "--method", method, "--json")     # 4.5 deg each

@@ -114,6 +114,7 @@ def test_path_with_a_newline_stays_one_line(tmp_path):
     assert repr(str(path)) in str(_error(path))
 
 
+@pytest.mark.serial    # checks the CLI's output, which only rank 0 prints
 def test_cli_prints_one_line_and_exits_2(tmp_path):
     scene = tmp_path / "in" / "s.toml"
     scene.parent.mkdir()
