@@ -42,8 +42,8 @@ def newton(residual, tangent, x0: np.ndarray, *, rtol: float = 1e-10, maxit: int
                 ok = True
                 break
             J = tangent(x, s)
-            floor = _residual_floor(J, x)
-            if rn <= floor and len(history) > 1 and rn > 0.5 * history[-2]:
+            if (len(history) > 1 and rn > 0.5 * history[-2]          # no longer halving
+                    and rn <= _residual_floor(J, x)):
                 ok = True
                 break
             dx = la.solve(J, -r)
