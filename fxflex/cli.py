@@ -266,7 +266,7 @@ def cmd_steady(args, comm) -> None:
     st = form.steady_state()
     t2 = time.perf_counter()
     verdict, why = stability_verdict(form, st)
-    warnings = list(getattr(form, "warnings", [])) + ([why] if why else [])
+    warnings = list(form.warnings) + ([why] if why else [])
     for note in warnings if comm.rank == 0 else []:
         log.warning(note)
     timings = {"preprocess": t1 - t0, "solve": t2 - t1}
@@ -367,12 +367,11 @@ def cmd_run(args, comm) -> None:
                               "pass the run's series with --out")
     t0 = time.perf_counter()
     form = build(args.method, scene, comm, options)
-    for note in getattr(form, "warnings", []):
+    for note in form.warnings:
         warnings.append(note)
         log.warning(note)
     t_pre = time.perf_counter() - t0
-    settings.update(force_eval=getattr(form, "force_eval", None),
-                    mass=getattr(form, "mass_kind", None))
+    settings.update(force_eval=form.force_eval, mass=form.mass_kind)
     if resumed is not None:
         check_settings(resumed, scene.to_dict(), scene.hash, settings, args.resume)
     layout = Layout(form) if (ckpt_path or resumed) else None
@@ -387,11 +386,10 @@ def cmd_run(args, comm) -> None:
         resume = Resume(step=resumed["step"], arrays=history, samples=resumed["samples"])
     fields = None
     if args.fields:
-        open_fields = getattr(form, "field_writer", None)
-        if open_fields is None:
+        if form.field_writer is None:
             raise FxflexError(f"--fields: not available for {args.method} (solid methods only)")
-        fields = open_fields(args.fields)
-    extra_cols = list(getattr(form, "extra_columns", []))
+        fields = form.field_writer(args.fields)
+    extra_cols = list(form.extra_columns)
     columns = ["t_s", "longitudinal_m", "orthogonal_m", "load_m"] + extra_cols
     implicit = {"rho_inf": rho_inf} if rho_inf is not None else {}
     meta = envelope(scene, method=args.method, integrator=integrator, dt_s=dt, **implicit,

@@ -10,17 +10,15 @@ they are distributed -- ``MPI.COMM_SELF`` when every rank holds a full copy -- a
 global reductions (norms) must use. Constrained coordinates (TLF and ANCF root nodes, which
 follow the drive) may be part of ``q``; ``constrain`` writes their exact values.
 
-Modes and stability about the rotating steady state (SPEC section 6, docs/stability.md): every
-method also offers ``linearise()`` -> (M, C, K) (dense, or PETSc matrices for TLF),
-``rotating_modes(pairs)`` -> the lowest roots and mode vectors, ``mode_tip(X)`` -> the tip
-section's translation and rotation in them, ``growth_rate()`` and ``stable()``.
-
-Robustness (docs/robustness.md), optional: ``deflection_range`` -- the deflection, in lengths,
-beyond which a run stops (default 0.25; TLF and ANCF, geometrically exact, 2); ``omega_max()`` --
-the highest circular frequency, for step limits; ``rotating_state(t, q, v)`` -> (z, z') in the
-coordinates of a dense ``linearise()`` (the energy of long runs); ``state_points()`` -> the
-undeformed coordinates of the owned nodes of a distributed state (TLF), by which checkpoints
-order it independently of the partition.
+The contract is the whole of what callers use (no caller probes a formulation with getattr):
+:class:`Dynamics` (what the explicit integrators need), :class:`Implicit` (generalized-alpha),
+:class:`RotatingAnalysis` (modes and stability about the rotating steady state, SPEC section 6,
+docs/stability.md) and :class:`Outputs` (optional outputs and probes, declared: an absent one is
+None, never missing). :class:`Formulation` is all four, and every method's class derives from
+:class:`FormulationBase`, which declares the defaults and computes the rotating analysis from the
+one thing a method supplies, ``linearise(steady)`` -> a linearisation with one interface whether
+dense (LAPACK, :class:`~fxflex.numerics.qep.DenseLinearisation`) or distributed (SLEPc PEP,
+:class:`~fxflex.numerics.petsc.PetscLinearisation`). ``tests/test_contract.py`` checks all six.
 
 Implicit integration (:class:`Implicit`, used by ``generalized-alpha``): the same equations written
 on the free coordinates as M q'' = F(t, q, q'), with the tangents K_t = -dF/dq and C_t = -dF/dq'
@@ -31,7 +29,7 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -40,14 +38,19 @@ from fxflex.methods import MODULES as _MODULES
 from fxflex.methods import dof_count
 from fxflex.scene import METHODS, Scene
 
-__all__ = ["Formulation", "Implicit", "TangentFactor", "SteadyState", "BuildOptions", "build", "check_options", "dof_count",
-           "default_integration", "method_info", "METHODS", "FORCE_EVAL", "PAPER_INTEGRATION",
-           "IMPLICIT_STEP", "IMPLICIT_MIN_STEP", "implicit_step"]
+__all__ = ["Formulation", "Dynamics", "Implicit", "RotatingAnalysis", "Outputs", "Linearisation",
+           "FormulationBase", "TangentFactor", "SteadyState", "BuildOptions", "build",
+           "check_options", "dof_count", "default_integration", "method_info", "METHODS",
+           "FORCE_EVAL", "PAPER_INTEGRATION", "IMPLICIT_STEP", "IMPLICIT_MIN_STEP",
+           "implicit_step", "OUTPUTS", "SMALL_DEFORMATION_RANGE"]
 
 #: --force-eval choices per method (SPEC section 8); the first is the default
 FORCE_EVAL = {"tlf": ("ufl", "invariant"), "nebb": ("invariant", "element"),
               "ancf": ("invariant", "element")}
 MASS = ("lumped", "consistent")
+#: deflection, in beam lengths, beyond which a run stops (the ``deflection_range`` of models of
+#: small deformation: floating-frame linear elasticity, von Karman)
+SMALL_DEFORMATION_RANGE = 0.25
 
 
 @dataclass(frozen=True)
@@ -73,7 +76,10 @@ class SteadyState:
 
 
 @runtime_checkable
-class Formulation(Protocol):
+class Dynamics(Protocol):
+    """What the explicit integrators and the steady-state solve need."""
+
+
     method: str
     scene: Scene
     comm: object                        # mpi4py communicator of the state arrays
@@ -136,6 +142,200 @@ class Implicit(Protocol):
         slow Newton down); returns the handle, which stays valid until the next call."""
 
 
+class Linearisation(Protocol):
+    """The motion linearised about the rotating steady state, M x'' + C x' + K x = 0 (SPEC
+    section 6, paper Eq. 59-64), and its roots x = e^(lambda t) x: dense arrays solved by LAPACK
+    (all roots) or distributed PETSc matrices solved by SLEPc (the lowest), behind one interface.
+    """
+
+    kind: str                   # "dense" or "petsc"
+    dof: int
+    M: object
+    C: object
+    K: object
+    note: str | None            # why :meth:`stable` returned None, when it did
+
+    def modes(self, pairs: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ``pairs`` lowest roots, one per conjugate pair, lowest frequency first, and their
+        mode vectors (this rank's entries)."""
+
+    def eigenvalues(self) -> np.ndarray:
+        """The roots the verdict is decided on (all, or the lowest)."""
+
+    def growth_rate(self) -> tuple[float, float]:
+        """(Re lambda, |Im lambda|) of the rightmost of them (1/s, rad/s)."""
+
+    def stable(self) -> bool | None:
+        """No root grows; None when round-off or the eigensolver cannot decide (``note``)."""
+
+    def top_frequency(self) -> float | None:
+        """sqrt of the largest eigenvalue of (K, M) (rad/s), or None when not computed."""
+
+    def destroy(self) -> None:
+        """Free the matrices (PETSc)."""
+
+
+@runtime_checkable
+class RotatingAnalysis(Protocol):
+    """Modes and stability about the rotating steady state (SPEC section 6, docs/stability.md)."""
+
+    stability_note: str | None          # why ``stable()`` is None, when it is
+
+    def linearise(self, steady: SteadyState | None = None) -> Linearisation:
+        """The motion linearised about ``steady`` (default: the scene's own steady state)."""
+
+    def rotating_modes(self, pairs: int, steady: SteadyState | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """The lowest roots, one per conjugate pair, and their mode vectors."""
+
+    def mode_tip(self, X: np.ndarray) -> np.ndarray:
+        """(6, k) tip-section translation and rotation of mode vectors (O-XYZ)."""
+
+    def eigenvalues(self, steady: SteadyState | None = None) -> np.ndarray:
+        """The roots the verdict is decided on."""
+
+    def growth_rate(self) -> tuple[float, float]:
+        """(Re lambda, |Im lambda|) of the rightmost root (1/s, rad/s)."""
+
+    def stable(self, steady: SteadyState | None = None) -> bool | None:
+        """No root grows (True / False); None when undecided, the reason in stability_note."""
+
+    def omega_max(self) -> float:
+        """The highest circular frequency of the clamped body at rest (rad/s): step limits."""
+
+    def top_frequency(self) -> float | None:
+        """The highest undamped circular frequency about the steady state where that is cheap
+        (a dense linearisation), otherwise ``omega_max()`` (rad/s): what explicit steps face."""
+
+
+#: the optional outputs of :class:`Outputs`: None where a method does not offer one
+OUTPUTS = ("extras", "root_stress", "field_writer", "state_points", "rotating_state")
+
+
+@runtime_checkable
+class Outputs(Protocol):
+    """Outputs and probes. The callables named in :data:`OUTPUTS` are None where a method does
+    not offer them (``form.probes()`` tells which); the rest always have a value."""
+
+    options: BuildOptions                # what the formulation was built with
+    warnings: list[str] | tuple[str, ...]  # said once about the build (e.g. twist per element)
+    force_eval: str | None               # the --force-eval route in use (None: not an option)
+    mass_kind: str | None                # the --mass in use (None: not an option)
+    deflection_range: float              # deflection, in lengths, beyond which a run stops
+    extra_columns: tuple[str, ...]       # series columns ``extras`` fills
+    #: (t, q, v) -> the values of extra_columns (drive torque)
+    extras: Callable[[float, np.ndarray, np.ndarray], tuple] | None
+    #: (t, q) -> axial stress sigma_X on the root section's points (Pa)
+    root_stress: Callable[[float, np.ndarray], np.ndarray] | None
+    #: (path) -> a writer of displacement fields with write(t, q) and close() (XDMF)
+    field_writer: Callable[[str], object] | None
+    #: () -> the undeformed coordinates of a distributed state's owned nodes (checkpoints)
+    state_points: Callable[[], np.ndarray] | None
+    #: (t, q, v) -> (z, z') in the coordinates of the dense linearisation (energy of long runs)
+    rotating_state: Callable[[float, np.ndarray, np.ndarray], tuple] | None
+
+    def probes(self) -> dict[str, bool]:
+        """Which of :data:`OUTPUTS` this formulation offers."""
+
+
+@runtime_checkable
+class Formulation(Dynamics, Implicit, RotatingAnalysis, Outputs, Protocol):
+    """Everything a built method offers: the whole contract."""
+
+    def at(self, *, rpm: float | None = None, damping: float | None = None,
+           model: str | None = None) -> "Formulation":
+        """The same method and build options for the scene at another constant speed (rpm),
+        damping coefficient c (kg/(m^3 s)) or damping model, sharing every operator that does
+        not depend on them."""
+
+
+class FormulationBase:
+    """The declared defaults of :class:`Outputs` and the rotating analysis of
+    :class:`RotatingAnalysis` computed from ``linearise()``, once per formulation; every method's
+    class derives from it. A method overrides a default by defining the member."""
+
+    options: BuildOptions = BuildOptions()
+    warnings: tuple[str, ...] = ()
+    stability_note: str | None = None
+    force_eval: str | None = None
+    mass_kind: str | None = None
+    deflection_range: float = SMALL_DEFORMATION_RANGE
+    extra_columns: tuple[str, ...] = ()
+    extras = None
+    root_stress = None
+    field_writer = None
+    state_points = None
+    rotating_state = None
+    _linear: Linearisation | None = None
+
+    def probes(self) -> dict[str, bool]:
+        """Which optional outputs (:data:`OUTPUTS`) this formulation offers."""
+        return {name: getattr(self, name) is not None for name in OUTPUTS}
+
+    def linearise(self, steady: SteadyState | None = None) -> Linearisation:
+        raise NotImplementedError(f"{type(self).__name__} does not define linearise()")
+
+    def linearisation(self, steady: SteadyState | None = None) -> Linearisation:
+        """``linearise(steady)``, computed once and kept with its roots (a formulation is built
+        for one scene, so for one steady state)."""
+        if self._linear is None:
+            self._linear = self.linearise(steady)
+        return self._linear
+
+    def rotating_modes(self, pairs: int, steady: SteadyState | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """The ``pairs`` lowest roots of the linearised rotating system, one per conjugate pair,
+        lowest frequency first, and their mode vectors (Linearisation.modes). Collective for
+        distributed models."""
+        return self.linearisation(steady).modes(pairs)
+
+    def eigenvalues(self, steady: SteadyState | None = None) -> np.ndarray:
+        """The roots of the linearised rotating system the verdict is decided on: all of them
+        for dense models, the lowest for TLF (SPEC section 6, Eq. 59-64)."""
+        return self.linearisation(steady).eigenvalues()
+
+    def growth_rate(self) -> tuple[float, float]:
+        """(Re lambda, |Im lambda|) of the rightmost root (1/s, rad/s)."""
+        return self.linearisation().growth_rate()
+
+    def top_frequency(self) -> float | None:
+        """sqrt of the largest eigenvalue of (K, M) of the linearisation about the steady state
+        (spin softening included, damping and gyroscopic terms left out), or ``omega_max()`` (the
+        body at rest) when there is no usable steady state or the linearisation does not say."""
+        try:
+            w = self.linearisation().top_frequency()
+        except (ValueError, np.linalg.LinAlgError):
+            w = None                # no usable steady state: the structure at rest
+        return w if w is not None else float(self.omega_max())
+
+    def stable(self, steady: SteadyState | None = None) -> bool | None:
+        """No root of the linearised rotating system grows; None when undecided, the reason
+        then in ``stability_note``."""
+        lin = self.linearisation(steady)
+        result = lin.stable()
+        if lin.note is not None:
+            self.stability_note = lin.note
+        return result
+
+    def at(self, *, rpm: float | None = None, damping: float | None = None,
+           model: str | None = None) -> "Formulation":
+        """The same method and build options for this scene at another constant speed, damping
+        coefficient or damping model. This default builds afresh (meshes, modes and invariants
+        come from the cache); methods that can share more override it."""
+        return build(self.method, rescene(self.scene, rpm=rpm, damping=damping, model=model),
+                     self.comm, self.options)
+
+
+def rescene(scene: Scene, *, rpm: float | None = None, damping: float | None = None,
+            model: str | None = None) -> Scene:
+    """``scene`` with the rotation speed (rpm), damping coefficient c or damping model replaced
+    (None: kept); checked like any scene."""
+    changes = {key: value for key, value in (("rotation.rpm", rpm), ("damping.c", damping),
+                                             ("damping.model", model)) if value is not None}
+    changes = {key: float(v) if key != "damping.model" else v for key, v in changes.items()}
+    return scene.replace(**changes) if changes else scene
+
+
 def method_info() -> dict[str, str]:
     return {"ffrf": "solid, floating frame, relative coordinates, CMS (Sect. 2.1)",
             "gcms": "solid, floating frame, absolute coordinates, CMS (Sect. 2.2)",
@@ -192,7 +392,9 @@ def build(method: str, scene: Scene, comm, options: BuildOptions | None = None) 
         raise
     with cache.deferred():
         try:
-            return module.build(scene, comm, options)
+            form = module.build(scene, comm, options)
+            form.options = options
+            return form
         except Exception as exc:
             # PETSc's (and so MUMPS's and SLEPc's) failed allocation is an error code, not
             # Python's MemoryError: made one, the CLI reports it as out of memory in one line

@@ -404,15 +404,14 @@ class Compare:
         t0 = time.perf_counter()
         form = self.form(method, rpm, c, model)
         st = form.steady_state()
-        stable_fn = getattr(form, "stable", None) if stability else None
-        stable = stable_fn(st) if callable(stable_fn) and st.converged else None   # None: undecided
-        growth_fn = getattr(form, "growth_rate", None) if stability else None
-        growth = float(growth_fn()[0]) if callable(growth_fn) and st.converged else None
+        decide = stability and st.converged
+        stable = form.stable(st) if decide else None             # None: undecided
+        growth = float(form.growth_rate()[0]) if decide else None
         sig = torque = None
         t_st = steady_time(form.scene)
-        if st.converged and callable(getattr(form, "root_stress", None)):
+        if st.converged and form.root_stress is not None:
             sig = form.root_stress(t_st, st.q)
-        if st.converged and callable(getattr(form, "extras", None)) and method != "gcms":
+        if st.converged and form.extras is not None and method != "gcms":
             # relative coordinates at rest in the rotating frame: q, q' = 0 (GCMS's absolute
             # coordinates move at the equilibrium, xi' = Omega J xi: not evaluated here)
             torque = float(form.extras(t_st, np.array(st.q, float), np.zeros(form.dof))[0])

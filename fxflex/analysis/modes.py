@@ -90,7 +90,7 @@ def modes_of(form, pairs: int) -> Modes:
     from fxflex.numerics.qep import EigenNotConverged, verdict
 
     t0 = time.perf_counter()
-    warnings = list(getattr(form, "warnings", []))
+    warnings = list(form.warnings)
     try:
         lam, X = form.rotating_modes(pairs)
     except EigenNotConverged as exc:

@@ -104,9 +104,9 @@ def run_case(form, case: Case, *, sample_dt: float, csv_path: str | None, meta: 
     limit (a quarter of the beam length). A larger one lets a physically unstable run grow over
     decades, so that its growth rate can be measured free of the bounded oscillation; the run
     is still reported as diverged where it passed the driver's limit."""
-    extra = list(getattr(form, "extra_columns", ()))
+    extra = list(form.extra_columns)
     columns = list(COLUMNS) + extra + list(STRESS_COLUMNS)
-    stress = getattr(form, "root_stress", None)
+    stress = form.root_stress
     writer = SeriesWriter(csv_path, meta, columns, enabled=enabled and csv_path is not None) \
         if csv_path else None
     rows: list[tuple] = []

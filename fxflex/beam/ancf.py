@@ -30,10 +30,10 @@ import scipy.sparse as sp
 from fxflex.beam.elements import ANCF_SLOTS, ancf_tables, gauss
 from fxflex.beam.invariants import GramChain
 from fxflex.beam.line import beam_line, twist_check
-from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
+from fxflex.formulation import FORCE_EVAL, BuildOptions, FormulationBase, SteadyState
 from fxflex.numerics.dense import DenseLU, newton, omega_max
 from fxflex.numerics.hub import HubFrameFactor
-from fxflex.numerics.qep import DenseStability
+from fxflex.numerics.qep import DenseLinearisation
 from fxflex.numerics.sparse import csr_matvec_add
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
@@ -98,7 +98,7 @@ def _voigt_pairs(nx: np.ndarray) -> np.ndarray:
     return np.stack(out, axis=-3)
 
 
-class ANCF(DenseStability):
+class ANCF(FormulationBase):
     """Second-order ANCF beam in the inertial frame; see the module docstring."""
 
     method = "ancf"
@@ -423,15 +423,15 @@ class ANCF(DenseStability):
                                    timings={"steady": time.perf_counter() - t0})
         return self._steady
 
-    def linearise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def linearise(self, steady: SteadyState | None = None) -> DenseLinearisation:
         """(M, C, K) about the steady state in the rotating frame, free coordinates: C = 2 Omega
         M S + c/rho M, K = K_T(e*) - Omega^2 M P [+ c/rho Omega M S, absolute model]."""
-        e = self.steady_state().q
+        e = (steady or self.steady_state()).q
         omega = self.scene.rotation.omega
         f = np.ix_(self.free_dofs, self.free_dofs)
         M = np.kron(self.Ms, np.eye(3))[f]
         C = 2 * omega * np.kron(self.Ms, S3)[f] + self.c_rho * M
-        return M, C, self._effective_stiffness(e, omega)
+        return DenseLinearisation(M, C, self._effective_stiffness(e, omega))
 
     def mode_tip(self, X: np.ndarray) -> np.ndarray:
         """(6, k) tip translation and small section rotation of rotating-frame mode vectors X

@@ -31,9 +31,9 @@ import numpy as np
 
 from fxflex.beam.elements import lebb_tables
 from fxflex.beam.line import beam_line, twist_check
-from fxflex.formulation import SteadyState
+from fxflex.formulation import FormulationBase, SteadyState
 from fxflex.numerics.dense import DenseLU, newton, omega_max
-from fxflex.numerics.qep import DenseStability
+from fxflex.numerics.qep import DenseLinearisation
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
 
@@ -99,7 +99,7 @@ def _assemble(blocks: np.ndarray, n_full: int, dpn: int) -> np.ndarray:
     return out
 
 
-class FloatingFrameBeam(DenseStability):
+class FloatingFrameBeam(FormulationBase):
     """LEBB (and, with a nonlinear force, NEBB) in the floating frame; see the module docstring."""
 
     extra_columns = ("drive_torque_Nm",)
@@ -386,13 +386,13 @@ class FloatingFrameBeam(DenseStability):
                                    converged=ok, timings={"steady": time.perf_counter() - t0})
         return self._steady
 
-    def linearise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def linearise(self, steady: SteadyState | None = None) -> DenseLinearisation:
         """(M, C, K) of the motion about the steady state (SPEC section 6): C = 2 Omega G + D,
         K = K_L + K_N,T(W*) - Omega^2 N [+ c/rho Omega G for the absolute damping model]."""
-        W = self.steady_state().q
+        W = (steady or self.steady_state()).q
         omega = self.scene.rotation.omega
         C = 2 * omega * self.G + self.c_rho * self.M
-        return self.M.copy(), C, self._stiffness(W, omega)
+        return DenseLinearisation(self.M.copy(), C, self._stiffness(W, omega))
 
     def mode_tip(self, X: np.ndarray) -> np.ndarray:
         """(6, k) tip translation and rotation of mode vectors X (dof, k): the free-end node's

@@ -112,10 +112,7 @@ def _ab2_rate(form, dt: float, sigma: float) -> float | None:
     if form.method == "tlf":
         lam = np.array([complex(-sigma, form.omega_max())])
     else:
-        eig = getattr(form, "eigenvalues", None)
-        if not callable(eig):
-            return None
-        lam = np.asarray(eig())
+        lam = np.asarray(form.eigenvalues())
     return float(np.max(np.log(ab2_root(dt * lam)) / dt))
 
 

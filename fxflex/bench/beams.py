@@ -49,7 +49,7 @@ def time_steps(scene: Scene, method: str, force_eval: str | None, integrator: st
     cpu0 = time.process_time()
     res = simulate(form, integrator, dt, steps * dt, sample_every=steps)
     cpu = time.process_time() - cpu0
-    return {"method": method, "force_eval": getattr(form, "force_eval", force_eval),
+    return {"method": method, "force_eval": form.force_eval,
             "integrator": integrator, "dt_s": dt,
             "n_el": scene.mesh.beam_elements, "dof": form.dof, "preprocess_s": pre,
             "steps": res.steps, "solve_s": res.wall_s, "cpu_s": cpu, "us_per_step": 1e6 * res.wall_s / res.steps,

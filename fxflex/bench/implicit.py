@@ -78,7 +78,7 @@ def reference(form, t_end: float = T_END, integrator: str | None = None,
     if res.diverged:
         raise RuntimeError(f"{form.method} reference diverged: {res.diverged}")
     wall = res.wall_s
-    if getattr(form, "extras", None) is not None:      # sampling computed the drive torque
+    if form.extras is not None:      # sampling computed the drive torque
         wall, _ = _timed(form, integrator, dt, t_ref)
     return Reference(integrator, dt, hist[:, 0], hist[:, 1:], wall, res.steps)
 
@@ -105,7 +105,7 @@ def compare(form, ref: Reference, dt: float, rho_inf: float | None, t_end: float
     with np.errstate(divide="ignore", invalid="ignore"):      # a component that stays 0
         out["error_components"] = (np.abs(diff).max(axis=0) / ref.peaks).tolist()
     wall = res.wall_s
-    if timing and sample_dt is None and getattr(form, "extras", None) is not None:
+    if timing and sample_dt is None and form.extras is not None:
         wall, _ = _timed(form, "generalized-alpha", dt, t_end, rho_inf=rho_inf)
     out.update(wall_s=wall, us_per_step=1e6 * wall / res.steps, speedup=ref.wall_s / wall)
     return out

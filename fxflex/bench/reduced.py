@@ -140,7 +140,8 @@ def step_study(family: ReducedFamily, method: str, dts, t_end: float, ref_dt: fl
     ref, _ = history(form, ref_dt, t_end, 5e-6)
     peak = np.abs(ref[:, 1:4]).max(axis=0)
     n = form.dof
-    M, C, K = form.linearise()
+    lin = form.linearise()
+    M, C, K = lin.M, lin.C, lin.K
     lam, left = la.eig(np.block([[np.zeros((n, n)), np.eye(n)], [-K, -C]]), left=True,
                        right=False)
     rows = []

@@ -230,8 +230,8 @@ def long_run(form, integrator: str, h: float, steps: int, records: int = 2000) -
     import scipy.linalg as la
 
     t0 = time.perf_counter()
-    M, _, K = form.linearise()
-    K = 0.5 * (K + K.T)
+    lin = form.linearise()
+    M, K = lin.M, 0.5 * (lin.K + lin.K.T)
     zs, _ = form.rotating_state(0.0, form.steady_state().q, np.zeros_like(form.steady_state().q))
     n = K.shape[0]
     lam, vec = la.eigh(K, M, subset_by_index=[n - 1, n - 1])

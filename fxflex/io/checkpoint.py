@@ -53,7 +53,7 @@ class Layout:
 
     def __init__(self, form):
         self.comm = form.comm
-        points_fn = getattr(form, "state_points", None)
+        points_fn = form.state_points
         self.kind = "replicated" if points_fn is None else "canonical-node-order"
         self._entries = None            # rank 0: canonical index of each gathered entry
         self._counts = None

@@ -17,7 +17,7 @@ from slepc4py import SLEPc
 
 from fxflex.numerics.qep import EigenNotConverged
 
-__all__ = ["pep_eigen", "make_direct", "TOL", "MAX_IT"]
+__all__ = ["pep_eigen", "make_direct", "PetscLinearisation", "TOL", "MAX_IT"]
 
 #: relative residual the PEP converges each root to, by default
 TOL = 1e-10
@@ -79,3 +79,78 @@ def pep_eigen(M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, pairs: int, *, target: f
         raise EigenNotConverged(f"SLEPc PEP converged {len(lam)} of {pairs} eigenvalue pairs",
                                 np.array(lam, dtype=complex), X)
     return np.array(lam), X, np.array(errors)
+
+
+class PetscLinearisation:
+    """The linearised motion M x'' + C x' + K x = 0 as distributed PETSc matrices, and what follows
+    from it by SLEPc's PEP (:func:`pep_eigen`): the same methods as
+    :class:`fxflex.numerics.qep.DenseLinearisation`, so callers never ask which. Only the lowest
+    roots are computed -- a rotating beam loses stability through its low modes (a root through
+    zero, or low modes merging); the high ones are damped at about -c/(2 rho) and hardly moved by
+    the rotation -- at least ``min_pairs`` of them, kept, so that the verdict after a modal
+    analysis costs nothing. Collective on the matrices' communicator."""
+
+    kind = "petsc"
+
+    def __init__(self, M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, *, min_pairs: int = 8,
+                 rtol: float = 1e-8):
+        self.M, self.C, self.K = M, C, K
+        self.dof = K.getSize()[0]
+        self.min_pairs = min_pairs      # lowest pairs behind eigenvalues(), stable(), growth_rate()
+        self.rtol = rtol                # a root grows when Re > rtol max|lambda| (PEP residual)
+        self.note: str | None = None
+        self._modes: tuple[np.ndarray, np.ndarray | None, int] | None = None
+
+    def modes(self, pairs: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ``pairs`` lowest roots, one per conjugate pair, lowest frequency first, and their
+        mode vectors on this rank's entries; at most ``dof``. When the PEP converges fewer, the
+        ones it has are kept and :class:`~fxflex.numerics.qep.EigenNotConverged` is raised with
+        them, now and on each later call that asks for more."""
+        from fxflex.numerics.qep import conjugate_pairs
+
+        pairs = min(pairs, self.dof)
+        if self._modes is None or self._modes[2] < pairs:
+            count = min(max(pairs, self.min_pairs), self.dof)
+            try:
+                lam, X, _ = pep_eigen(self.M, self.C, self.K, count)
+            except EigenNotConverged as exc:
+                lam, X = exc.eigenvalues, exc.vectors
+            keep = conjugate_pairs(lam)[:count]
+            self._modes = (lam[keep], X[:, keep] if X is not None else None, count)
+        lam, X, _ = self._modes
+        if lam.size < pairs:
+            raise EigenNotConverged(f"SLEPc PEP converged {lam.size} of {pairs} eigenvalue "
+                                    "pairs", lam, X)
+        return lam[:pairs], X[:, :pairs]
+
+    def eigenvalues(self) -> np.ndarray:
+        """The ``min_pairs`` lowest roots."""
+        return self.modes(self.min_pairs)[0]
+
+    def growth_rate(self) -> tuple[float, float]:
+        """(Re lambda, |Im lambda|) of the rightmost of the lowest roots (1/s, rad/s)."""
+        from fxflex.numerics.qep import rightmost
+        return rightmost(self.eigenvalues())
+
+    def stable(self) -> bool | None:
+        """No growing root among the lowest (:func:`fxflex.numerics.qep.unstable`, with the
+        PEP's own tolerance). When the PEP converged only some of them, a growing one among
+        those still decides (False); otherwise None, undecided, the reason in ``note``."""
+        from fxflex.numerics.qep import unstable
+        try:
+            lam = self.eigenvalues()
+        except EigenNotConverged as exc:
+            if exc.eigenvalues.size and unstable(exc.eigenvalues, rtol=self.rtol):
+                return False
+            self.note = f"stability not decided: {exc}"
+            return None
+        return not unstable(lam, rtol=self.rtol)
+
+    def top_frequency(self) -> float | None:
+        """Not computed from these matrices (a SLEPc solve of its own): None, and callers use
+        the formulation's ``omega_max()``."""
+        return None
+
+    def destroy(self) -> None:
+        for A in (self.M, self.C, self.K):
+            A.destroy()

@@ -31,7 +31,7 @@ import scipy.linalg as la
 
 __all__ = ["companion", "companion_eigenvalues", "quadratic_eigen", "conjugate_pairs",
            "rightmost", "growth_rate", "unstable", "root_errors", "STABILITY_RTOL",
-           "TROPICAL_TAU", "DenseStability", "EigenNotConverged", "verdict"]
+           "TROPICAL_TAU", "DenseLinearisation", "EigenNotConverged", "verdict"]
 
 #: a root counts as growing when Re lambda > STABILITY_RTOL max|lambda| (:func:`unstable`, for
 #: callers without eigenvectors): the round-off of a dense eigensolver is about eps ||A||, so a
@@ -56,15 +56,12 @@ class EigenNotConverged(RuntimeError):
 
 def verdict(form, steady=None) -> tuple[bool | None, str | None]:
     """(stable, warning): the formulation's ``stable()`` (True, False, or None when its
-    eigenvalues cannot decide, the reason then in ``form.stability_note``), or (None, None)
-    without one. A steady state that converged is kept whatever the eigensolver does: ``stable``
-    is null until the modal analysis exists (SPEC section 8)."""
-    stable = getattr(form, "stable", None)
-    if not callable(stable):
-        return None, None
-    result = stable(steady) if steady is not None else stable()
+    eigenvalues cannot decide, the reason then in ``form.stability_note``). A steady state that
+    converged is kept whatever the eigensolver does: ``stable`` is null until the modal analysis
+    exists (SPEC section 8)."""
+    result = form.stable(steady)
     if result is None:
-        return None, getattr(form, "stability_note", None) or "stability not decided"
+        return None, form.stability_note or "stability not decided"
     return bool(result), None
 
 
@@ -188,21 +185,25 @@ def unstable(lam: np.ndarray, rtol: float = STABILITY_RTOL) -> bool:
     return bool(lam.real.max() > rtol * np.abs(lam).max())
 
 
-class DenseStability:
-    """Eigenvalues, growth rate and stability verdict from a formulation's dense ``linearise()``
-    -> (M, C, K); mixed into the reduced and beam formulations (each built for one scene, so the
-    eigenvalues are computed once)."""
+class DenseLinearisation:
+    """The linearised motion M x'' + C x' + K x = 0 as dense arrays, and what follows from it:
+    every root, computed once by LAPACK (:func:`_eigen_lr`, tropical scaling when badly scaled),
+    each with its error estimate (:func:`root_errors`). The reduced and beam formulations'
+    ``linearise()``; TLF's is :class:`fxflex.numerics.petsc.PetscLinearisation`, with the same
+    methods."""
 
-    _eigen: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-    stability_note: str | None = None
+    kind = "dense"
 
-    def linearise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        raise NotImplementedError
+    def __init__(self, M: np.ndarray, C: np.ndarray, K: np.ndarray):
+        self.M, self.C, self.K = M, C, K
+        self.dof = K.shape[0]
+        self.note: str | None = None        # why :meth:`stable` is undecided, when it is
+        self._eigen: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def _eigenpairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(lambda, X, error estimate) of every root, computed once."""
         if self._eigen is None:
-            M, C, K = self.linearise()
+            M, C, K = self.M, self.C, self.K
             lam, X, Y = _eigen_lr(M, C, K)
             self._eigen = (lam, X, root_errors(M, C, K, lam, X, Y))
         return self._eigen
@@ -211,9 +212,9 @@ class DenseStability:
         """All eigenvalues of the linearised rotating system (SPEC section 6, Eq. 59-64)."""
         return self._eigenpairs()[0]
 
-    def rotating_modes(self, pairs: int) -> tuple[np.ndarray, np.ndarray]:
+    def modes(self, pairs: int) -> tuple[np.ndarray, np.ndarray]:
         """The ``pairs`` lowest roots, one per conjugate pair (:func:`conjugate_pairs`), and
-        their mode vectors: (lambda (k,), X (dof, k) complex)."""
+        their mode vectors: (lambda (k,), X (dof, k) complex); all there are when fewer."""
         lam, X, _ = self._eigenpairs()
         keep = conjugate_pairs(lam)[:pairs]
         return lam[keep], X[:, keep]
@@ -222,11 +223,11 @@ class DenseStability:
         """(Re lambda, |Im lambda|) of the rightmost root (1/s, rad/s)."""
         return rightmost(self.eigenvalues())
 
-    def stable(self, steady=None) -> bool | None:
+    def stable(self) -> bool | None:
         """No root of the linearised rotating system grows: every real part is below its own
         error estimate (:func:`root_errors`). A positive real part within its estimate counts
         as zero when the root itself is resolved (an undamped system's imaginary roots, real
-        parts of 1e-11 1/s); None (undecided, the reason in ``stability_note``) when such a
+        parts of 1e-11 1/s); None (undecided, the reason in ``note``) when such a
         root is lost in round-off, its estimate at least its modulus (absolute damping
         c = 1e30: the circulatory term (c/rho) Omega M_S, 6e28, buries the stiffness, 6e11,
         below eps times it)."""
@@ -235,9 +236,23 @@ class DenseStability:
             return False
         lost = (lam.real > 0.0) & (err >= np.abs(lam))
         if lost.any():
-            self.stability_note = (f"stability not decided: {int(lost.sum())} roots of the "
-                                   "linearised system with a positive real part are below its "
-                                   f"round-off (error estimate up to {err[lost].max():.3g} 1/s, "
-                                   "at least their modulus)")
+            self.note = (f"stability not decided: {int(lost.sum())} roots of the "
+                         "linearised system with a positive real part are below its "
+                         f"round-off (error estimate up to {err[lost].max():.3g} 1/s, "
+                         "at least their modulus)")
             return None
         return True
+
+    def top_frequency(self) -> float | None:
+        """sqrt of the largest eigenvalue of (K, M), the damping and gyroscopic terms left out
+        (rad/s): the highest circular frequency about the steady state, for step limits; None
+        when K is not finite (no usable steady state)."""
+        if not np.all(np.isfinite(self.K)):
+            return None
+        n = self.K.shape[0]
+        lam = la.eigh(0.5 * (self.K + self.K.T), self.M, eigvals_only=True,
+                      subset_by_index=[n - 1, n - 1])[0]
+        return float(np.sqrt(max(lam, 0.0)))
+
+    def destroy(self) -> None:
+        """Nothing to free (the PETSc linearisation frees its matrices)."""

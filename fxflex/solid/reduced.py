@@ -51,8 +51,8 @@ from mpi4py import MPI
 from fxflex import cache
 from fxflex.numerics.dense import DenseLU
 from fxflex.numerics.growth import ab2_root
-from fxflex.numerics.qep import DenseStability
-from fxflex.formulation import SteadyState
+from fxflex.numerics.qep import DenseLinearisation
+from fxflex.formulation import FormulationBase, SteadyState
 from fxflex.scene import Drive, Scene
 
 if TYPE_CHECKING:                   # a cache hit needs neither PETSc nor dolfinx: imported on use
@@ -206,7 +206,7 @@ class RotatingSystem:
     section: np.ndarray  # (6, k): tip-centre translation and tip-section rotation per unit z
 
 
-class ReducedFormulation(DenseStability):
+class ReducedFormulation(FormulationBase):
     """Common part of FFRF and GCMS: state layout, linearisation, eigenvalues, steady state.
 
     Subclasses set ``dof``, ``rot`` (:class:`RotatingSystem`) and the three operators of
@@ -287,7 +287,7 @@ class ReducedFormulation(DenseStability):
     def omega_s(self) -> float:
         return self.scene.rotation.omega
 
-    def linearise(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def linearise(self, steady: SteadyState | None = None) -> DenseLinearisation:
         """(M, C, K) of the reduced equations linearised about the steady state in the rotating
         frame: C = 2 Omega G_r + (c/rho) I (Coriolis + damping), K = K_r - Omega^2 N_r
         (+ (c/rho) Omega G_r, the circulatory term of the absolute damping model). The reduced
@@ -298,7 +298,7 @@ class ReducedFormulation(DenseStability):
         K = r.K - w * w * r.N
         if self.absolute:
             K = K + self.c_rho * w * r.G
-        return eye, C, K
+        return DenseLinearisation(eye, C, K)
 
     def rotating_state(self, t: float, q: np.ndarray, v: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -330,7 +330,7 @@ class ReducedFormulation(DenseStability):
         """(K_r - Omega^2 N_r [+ (c/rho) Omega G_r]) z = f_r + Omega^2 n_r at the scene's speed
         (the final speed of a spin-up): Eq. 59 with the time derivatives set to zero."""
         t0 = time.perf_counter()
-        _, _, K = self.linearise()
+        K = self.linearise().K
         r, w = self.rot, self.omega_s
         rhs = r.f + w * w * r.n
         z = np.linalg.solve(K, rhs)

@@ -22,13 +22,12 @@ rank numbers in the order of its owned entries.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import ufl
 from dolfinx import fem
 from petsc4py import PETSc
 
+from fxflex.numerics.petsc import PetscLinearisation
 from fxflex.scene.kinematics import P3, S3
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel
@@ -36,19 +35,16 @@ from fxflex.solid.model import SolidModel
 __all__ = ["Linearisation", "tlf_linearisation", "free_entries"]
 
 
-@dataclass
-class Linearisation:
-    """(M, C, K) on the free coordinates; ``free`` maps them to this rank's owned entries."""
+class Linearisation(PetscLinearisation):
+    """(M, C, K) on the free coordinates, with the PEP analysis of
+    :class:`~fxflex.numerics.petsc.PetscLinearisation`; ``free`` maps the coordinates to this
+    rank's owned entries."""
 
-    M: PETSc.Mat
-    C: PETSc.Mat
-    K: PETSc.Mat
-    free: np.ndarray            # owned-entry index of each local free coordinate
-    n_owned: int
-
-    def destroy(self) -> None:
-        for A in (self.M, self.C, self.K):
-            A.destroy()
+    def __init__(self, M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, free: np.ndarray, n_owned: int,
+                 **analysis):
+        super().__init__(M, C, K, **analysis)
+        self.free = free            # owned-entry index of each local free coordinate
+        self.n_owned = n_owned
 
 
 def free_entries(model: SolidModel) -> np.ndarray:
@@ -77,7 +73,7 @@ def _nodal(model: SolidModel, m: np.ndarray, free: np.ndarray, B: np.ndarray) ->
 
 
 def tlf_linearisation(model: SolidModel, U: np.ndarray, omega: float, c_rho: float,
-                      absolute: bool, mass: str) -> Linearisation:
+                      absolute: bool, mass: str, **analysis) -> Linearisation:
     """(M, C, K) of the module docstring about the owned steady displacement U (O-XYZ) at speed
     omega (rad/s), with the ``consistent`` or ``lumped`` mass. Collective on ``model.comm``."""
     free = free_entries(model)
@@ -122,4 +118,4 @@ def tlf_linearisation(model: SolidModel, U: np.ndarray, omega: float, c_rho: flo
         K.axpy(1.0, inertia, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         inertia.destroy()
     rows.destroy()
-    return Linearisation(M=M, C=C, K=K, free=free, n_owned=model.n_owned)
+    return Linearisation(M, C, K, free, model.n_owned, **analysis)

@@ -48,7 +48,7 @@ from dolfinx import cpp, fem
 from petsc4py import PETSc
 from scipy.linalg.blas import daxpy
 
-from fxflex.formulation import FORCE_EVAL, BuildOptions, SteadyState
+from fxflex.formulation import FORCE_EVAL, BuildOptions, FormulationBase, SteadyState
 from fxflex.numerics.hub import HubFrameFactor
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import rotation_cs, rotation_z
@@ -169,7 +169,7 @@ def _make_force(kind: str, model: SolidModel):
     return InvariantForce(model)
 
 
-class TLF:
+class TLF(FormulationBase):
     """The TLF formulation behind the :class:`~fxflex.formulation.Formulation` interface.
 
     The transient operators are built on the first call of ``initial_state`` (eagerly when the
@@ -198,8 +198,6 @@ class TLF:
         self._omega_max: float | None = None
         self._root: tuple | None = None
         self._steady: SteadyState | None = None
-        self._modes: tuple[np.ndarray, np.ndarray | None, int] | None = None
-        self.stability_note: str | None = None
         if not options.need_steady:
             self._dyn = _Dynamics(self)
         self.timings["build"] = time.perf_counter() - t0
@@ -369,44 +367,22 @@ class TLF:
     # -- linearised motion about the steady state (SPEC section 6) --------------------------------
     def linearise(self, steady: SteadyState | None = None) -> Linearisation:
         """(M, C, K) of the motion about the rotating equilibrium as PETSc matrices on the free
-        coordinates, with the mass in use (:mod:`fxflex.solid.rotating`). Collective."""
+        coordinates, with the mass in use (:mod:`fxflex.solid.rotating`), analysed by SLEPc's
+        PEP: the STABILITY_PAIRS lowest roots decide the verdict, a root growing when its real
+        part exceeds PEP_STABILITY_RTOL of the largest modulus. Collective."""
         from fxflex.solid.rotating import tlf_linearisation
 
         st = steady or self.steady_state()
         sc = self.scene
         return tlf_linearisation(self.model, st.q, sc.rotation.omega,
                                  sc.damping.c / sc.material.rho, sc.damping.model == "absolute",
-                                 self.mass_kind)
+                                 self.mass_kind, min_pairs=STABILITY_PAIRS,
+                                 rtol=PEP_STABILITY_RTOL)
 
-    def rotating_modes(self, pairs: int, steady: SteadyState | None = None
-                       ) -> tuple[np.ndarray, np.ndarray]:
-        """The ``pairs`` lowest roots of the linearised rotating system, one per conjugate pair,
-        lowest frequency first, and their mode vectors on this rank's free coordinates (SLEPc
-        PEP, :mod:`fxflex.numerics.petsc`). Collective. At least STABILITY_PAIRS are computed
-        and kept, so that ``stable()`` after it costs nothing; at most ``dof`` (the n pairs of
-        2n complex roots). When the PEP converges fewer, the ones it has are kept too and
-        :class:`~fxflex.numerics.qep.EigenNotConverged` is raised with them, now and on each
-        later call that asks for more."""
-        from fxflex.numerics.petsc import pep_eigen
-        from fxflex.numerics.qep import EigenNotConverged, conjugate_pairs
-
-        pairs = min(pairs, self.dof)
-        if self._modes is None or self._modes[2] < pairs:
-            count = min(max(pairs, STABILITY_PAIRS), self.dof)
-            lin = self.linearise(steady)
-            try:
-                lam, X, _ = pep_eigen(lin.M, lin.C, lin.K, count)
-            except EigenNotConverged as exc:
-                lam, X = exc.eigenvalues, exc.vectors
-            finally:
-                lin.destroy()
-            keep = conjugate_pairs(lam)[:count]
-            self._modes = (lam[keep], X[:, keep] if X is not None else None, count)
-        lam, X, _ = self._modes
-        if lam.size < pairs:
-            raise EigenNotConverged(f"SLEPc PEP converged {lam.size} of {pairs} eigenvalue "
-                                    "pairs", lam, X)
-        return lam[:pairs], X[:, :pairs]
+    def top_frequency(self) -> float:
+        """``omega_max()``: the clamped body at rest, one SLEPc solve, rather than a steady state
+        and a linearisation (step limits do not need the rotating state's)."""
+        return self.omega_max()
 
     def mode_tip(self, X: np.ndarray) -> np.ndarray:
         """(6, k) tip translation and section rotation of mode vectors on the free coordinates
@@ -416,32 +392,6 @@ class TLF:
         full = np.zeros((self.model.n_owned,) + X.shape[1:], dtype=X.dtype)
         full[free_entries(self.model)] = X
         return self.model.tip_section(full)
-
-    def eigenvalues(self, steady: SteadyState | None = None) -> np.ndarray:
-        """The STABILITY_PAIRS lowest roots: a rotating beam loses stability through its low
-        modes (a root through zero, or low modes merging); the high ones are damped at about
-        -c/(2 rho) and hardly moved by the rotation."""
-        return self.rotating_modes(STABILITY_PAIRS, steady)[0]
-
-    def growth_rate(self) -> tuple[float, float]:
-        """(Re lambda, |Im lambda|) of the rightmost of the lowest roots (1/s, rad/s)."""
-        from fxflex.numerics.qep import rightmost
-        return rightmost(self.eigenvalues())
-
-    def stable(self, steady: SteadyState | None = None) -> bool | None:
-        """No growing root among the lowest (:func:`fxflex.numerics.qep.unstable`, with the
-        PEP's own tolerance). When the PEP converged only some of them, a growing one among
-        those still decides (False); otherwise None, undecided, the reason in
-        ``stability_note``."""
-        from fxflex.numerics.qep import EigenNotConverged, unstable
-        try:
-            lam = self.eigenvalues(steady)
-        except EigenNotConverged as exc:
-            if exc.eigenvalues.size and unstable(exc.eigenvalues, rtol=PEP_STABILITY_RTOL):
-                return False
-            self.stability_note = f"stability not decided: {exc}"
-            return None
-        return not unstable(lam, rtol=PEP_STABILITY_RTOL)
 
     # -- pieces -----------------------------------------------------------------------------------
     def internal_force(self, q: np.ndarray) -> np.ndarray:

@@ -26,7 +26,7 @@ import numpy as np
 
 from fxflex.numerics.growth import growth_fit
 from fxflex.time import stability
-from fxflex.time.driver import SMALL_DEFORMATION_RANGE
+from fxflex.formulation import SMALL_DEFORMATION_RANGE
 
 __all__ = ["diagnose", "ab2_growth_exponent", "measured_growth_rate", "deviation_growth",
            "ab2_warning", "AB2_LOG_GROWTH"]
@@ -91,10 +91,7 @@ def ab2_warning(form, dt: float, t: float) -> str | None:
     mode by more than exp(AB2_LOG_GROWTH) (exact root, w_max from ``omega_max()``): its output
     may then carry a spurious high-frequency part too small to stop the run (docs/reduced.md:
     GCMS at 0.5 us is 20x off after 10 ms without diverging). None otherwise."""
-    wmax_fn = getattr(form, "omega_max", None)
-    if not callable(wmax_fn):
-        return None
-    w = float(wmax_fn())
+    w = float(form.omega_max())
     d = form.scene.damping.c / form.scene.material.rho
     rate = stability.growth_rate("ab2", dt, w, d)
     if rate * t <= AB2_LOG_GROWTH:
@@ -108,15 +105,12 @@ def ab2_warning(form, dt: float, t: float) -> str | None:
 def _physical(form) -> tuple[float, float, bool] | None:
     """(Re lambda_max, |Im lambda| of that root, unstable) of the linearised system about a
     converged steady state (the verdict is the formulation's own ``stable()``, with its
-    eigensolver's round-off tolerance), or None without eigenvalue analysis or steady state."""
-    growth, stable = getattr(form, "growth_rate", None), getattr(form, "stable", None)
-    if not callable(growth):
-        return None
+    eigensolver's round-off tolerance), or None without a converged steady state."""
     try:
         if not form.steady_state().converged:
             return None
-        rate, freq = growth()
-        grows = (stable() is False) if callable(stable) else rate > 0.0
+        rate, freq = form.growth_rate()
+        grows = form.stable() is False
     except (ValueError, np.linalg.LinAlgError, RuntimeError):
         return None
     return (rate, freq, bool(grows and rate > 0.0)) if math.isfinite(rate) else None
@@ -191,9 +185,8 @@ def diagnose(form, integrator: str, dt: float, result) -> dict:
     out["cause"] = "physical"
     eig = ("no eigenvalue of the linearised rotating system has a positive real part "
            f"(largest {phys[0]:.3g} 1/s)" if phys is not None else
-           f"{getattr(form, 'method', 'this model')} offers no eigenvalue analysis of the "
-           "rotating state")
-    span = getattr(form, "deflection_range", SMALL_DEFORMATION_RANGE)
+           f"{form.method} has no eigenvalue analysis of this state (no converged steady state)")
+    span = form.deflection_range
     model = ("the small-deformation range of the model (the geometrically exact tlf and ancf "
              "follow large deflections)" if span <= SMALL_DEFORMATION_RANGE else
              "the range of the model")

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fxflex.formulation import SMALL_DEFORMATION_RANGE
 from fxflex.time.implicit import NewtonFailure
 from fxflex.time.schemes import make_scheme
 
@@ -46,8 +47,6 @@ __all__ = ["RunResult", "Resume", "simulate", "divergence_limit", "step_to_end",
 
 #: deflections checked for the measured growth rate of a divergence
 GROWTH_POINTS = 512
-#: a deflection beyond this fraction of the length is outside every small-deformation model
-SMALL_DEFORMATION_RANGE = 0.25
 
 
 @dataclass
@@ -79,7 +78,7 @@ def divergence_limit(form) -> float:
     beam length. A quarter of the length is far past the range of the linear and von Karman
     models; the geometrically exact ones (TLF, ANCF) set 2: the tip of an inextensible beam stays
     within 2 L of its rigidly rotated position, so beyond it only a run out of control goes."""
-    return getattr(form, "deflection_range", SMALL_DEFORMATION_RANGE) * form.scene.geometry.length
+    return form.deflection_range * form.scene.geometry.length
 
 
 def step_to_end(span: float, dt: float, rtol: float = 1e-9) -> tuple[float, int]:
@@ -122,9 +121,8 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
     nsteps = max(int(round((t_end - t0) / dt)), 1)
     q, v = form.initial_state() if state is None else state
     wanted = extras and (on_sample is not None or keep_history)
-    extras = getattr(form, "extras", None) if wanted else None
-    comm = getattr(form, "comm", None)
-    distributed = comm is not None and comm.size > 1
+    extras = form.extras if wanted else None
+    distributed = form.comm.size > 1
     history = []
     ring = np.zeros((GROWTH_POINTS, 2))
     last_tip = np.zeros(3)

@@ -53,6 +53,8 @@ import time
 
 import numpy as np
 
+from fxflex.formulation import Implicit
+
 __all__ = ["GeneralizedAlpha", "NewtonFailure", "parameters", "DEFAULT_RHO_INF"]
 
 DEFAULT_RHO_INF = 0.9
@@ -129,15 +131,15 @@ class GeneralizedAlpha:
 
     def _setup(self, form, n: int) -> None:
         """Work arrays and a fresh modified-Newton state."""
-        for attr in ("force", "mass_apply", "factorize"):
-            if not callable(getattr(form, attr, None)):
-                raise TypeError(f"generalized-alpha: {form.method} does not offer {attr}() "
-                                f"(the Implicit interface of fxflex.formulation)")
+        if not isinstance(form, Implicit) or not callable(form.factorize):
+            raise TypeError(f"generalized-alpha: {form.method} does not offer force(), "
+                            "mass_apply() and factorize() (the Implicit interface of "
+                            "fxflex.formulation)")
         self.qdd, self.a = np.empty(n), np.empty(n)
         (self.abar, self.qb, self.vb, self.x, self.qn, self.vn, self.r, self.f, self.dx,
          self.w) = (np.empty(n) for _ in range(10))
         self.comm = form.comm
-        self._parallel = getattr(self.comm, "size", 1) > 1
+        self._parallel = self.comm.size > 1
         self._red, self._red_sum = np.zeros(3), np.zeros(3)
         self.factor = None
         self._h_factor = None

@@ -24,9 +24,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.linalg as la
+from mpi4py import MPI
 
-from fxflex.numerics.qep import DenseStability
 from fxflex.time.schemes import make_scheme
 
 __all__ = ["step_map", "amplification", "growth_rate", "critical_step", "ab2_law_rate",
@@ -36,7 +35,7 @@ __all__ = ["step_map", "amplification", "growth_rate", "critical_step", "ab2_law
 class _Mode:
     """q'' + d q' + w^2 q = 0 behind the Formulation and Implicit interfaces (one dof, M = 1)."""
 
-    comm = None
+    comm = MPI.COMM_SELF
     method = "one-mode"
 
     def __init__(self, w: float, d: float):
@@ -131,22 +130,8 @@ def ab2_law_step(w: float, window: float, log_growth: float = 1.0, d: float = 0.
 
 
 def top_mode(form) -> tuple[float | None, float]:
-    """(w_max, d) of a formulation: its highest undamped circular frequency (rad/s; None if it
-    cannot say) and the damping rate c/rho (1/s). w_max is sqrt of the largest eigenvalue of (K, M) of the dense
-    linearisation about the steady state where the formulation offers one (reduced models and
-    beams: spin softening included, the damping and gyroscopic terms left out), otherwise
-    ``omega_max()`` (TLF: the clamped body at rest, SLEPc)."""
-    scene = getattr(form, "scene", None)
-    d = scene.damping.c / scene.material.rho if scene is not None else 0.0
-    if isinstance(form, DenseStability):           # dense (M, C, K); TLF's are PETSc matrices
-        try:
-            M, _, K = form.linearise()
-            if np.all(np.isfinite(K)):
-                n = K.shape[0]
-                lam = la.eigh(0.5 * (K + K.T), M, eigvals_only=True,
-                              subset_by_index=[n - 1, n - 1])[0]
-                return math.sqrt(max(lam, 0.0)), d
-        except (ValueError, np.linalg.LinAlgError, la.LinAlgError):
-            pass                # no usable steady state: fall back on the structure at rest
-    omega_max = getattr(form, "omega_max", None)
-    return (float(omega_max()) if callable(omega_max) else None), d
+    """(w_max, d) of a formulation: its highest undamped circular frequency (rad/s, its
+    ``top_frequency()``: about the steady state where the linearisation is dense, otherwise the
+    clamped body at rest) and the damping rate c/rho (1/s)."""
+    scene = form.scene
+    return form.top_frequency(), scene.damping.c / scene.material.rho

@@ -293,7 +293,8 @@ def test_ab2_growth_of_the_fastest_mode(small, dt):
     import scipy.linalg as la
 
     f = small.build("ffrf")
-    M, C, K = f.linearise()
+    lin = f.linearise()
+    M, C, K = lin.M, lin.C, lin.K
     n = f.dof
     lam, left = la.eig(np.block([[np.zeros((n, n)), np.eye(n)], [-K, -C]]), left=True,
                        right=False)

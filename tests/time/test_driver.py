@@ -3,19 +3,21 @@
 import numpy as np
 import pytest
 
+from mpi4py import MPI
+
+from fxflex.formulation import FormulationBase
 from fxflex.scene import Scene
 from fxflex.time import AB2, CentralDifference, simulate
 
 
-class Oscillator:
+class Oscillator(FormulationBase):
     """q'' = -w^2 q - 2 zeta w q' (one dof), behind the Formulation interface."""
 
     method = "oscillator"
 
     def __init__(self, w=2.0, zeta=0.05, q0=0.1):
         self.w, self.zeta, self.q0 = w, zeta, q0
-        self.scene = Scene()
-        self.dof = 1
+        self.scene, self.dof, self.comm = Scene(), 1, MPI.COMM_SELF
 
     def initial_state(self):
         return np.array([self.q0]), np.array([0.0])
@@ -70,7 +72,7 @@ def test_divergence_stops_early_with_a_reason():
     assert "beyond" in res.diverged["reason"] or "non-finite" in res.diverged["reason"]
 
 
-class Linear:
+class Linear(FormulationBase):
     """q'' = A q + B q' on two coordinates: the schemes' steps are written out below."""
 
     method = "linear"
