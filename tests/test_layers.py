@@ -120,3 +120,22 @@ def test_no_private_scipy_import():
                  if m.split(".")[0] == "scipy" and any(p.startswith("_") for p in m.split("."))
                  and (name, m) not in PRIVATE_ALLOWED)
     assert not bad
+
+
+def _probes(path: pathlib.Path) -> list[str]:
+    """getattr / hasattr calls on a formulation (a name or attribute called ``form``)."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                and node.func.id in ("getattr", "hasattr") and node.args):
+            target = node.args[0]
+            name = target.id if isinstance(target, ast.Name) else (
+                target.attr if isinstance(target, ast.Attribute) else None)
+            if name == "form":
+                found.append(f"{path.name}:{node.lineno}")
+    return found
+
+
+def test_no_caller_probes_a_formulation():
+    """The contract (fxflex.formulation) declares every member: callers never discover one."""
+    assert not [hit for path in MODULES.values() for hit in _probes(path)]
