@@ -41,11 +41,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from mpi4py import MPI
 
+from fxflex.formulation import FormulationBase
 from fxflex.numerics.growth import growth_fit
 from fxflex.numerics.qep import companion_eigenvalues, unstable
 
-__all__ = ["TwoDof", "CASES", "case_systems", "eq63_roots", "integrate", "measured_growth",
+__all__ = ["TwoDof", "Inertial", "CASES", "case_systems", "eq63_roots", "integrate", "measured_growth",
            "behaviour"]
 
 J2 = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -126,12 +128,22 @@ class TwoDof:
         """Eq. 64 (no gyroscopic term): stable iff K_L - Omega^2 I is positive definite."""
         return self.stiffness_definiteness() == "positive definite"
 
-    # -- inertial frame (Eq. 61), as a formulation for fxflex.time -------------------------------
+
+class Inertial(FormulationBase):
+    """Eq. 61 of a :class:`TwoDof` in the inertial frame, behind the formulation contract of
+    :mod:`fxflex.formulation` so that fxflex.time integrates it (only the dynamics: no scene,
+    steady state or rotating analysis of its own -- :class:`TwoDof` has those)."""
+
+    method = "twodof"
     dof = 2
+    comm = MPI.COMM_SELF
+
+    def __init__(self, system: TwoDof):
+        self.k1, self.k2, self.omega, self.c = system.k1, system.k2, system.omega, system.c
+        self.damping = system.damping
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
         return np.array([1e-3, 1e-3]), np.zeros(2)
-
     def constrain(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
         """No constraints."""
 
@@ -170,7 +182,7 @@ def integrate(system: TwoDof, t_end: float = 200.0, dt: float = 2e-3, integrator
     4.8 times too large after 200 s."""
     from fxflex.time import simulate
 
-    res = simulate(system, integrator, dt, t_end, sample_every=max(1, int(round(0.05 / dt))),
+    res = simulate(Inertial(system), integrator, dt, t_end, sample_every=max(1, int(round(0.05 / dt))),
                    keep_history=True, limit=1e12)
     h = np.array(res.history)
     return h[:, :3]
