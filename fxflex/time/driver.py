@@ -122,7 +122,8 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
     q, v = form.initial_state() if state is None else state
     wanted = extras and (on_sample is not None or keep_history)
     extras = form.extras if wanted else None
-    distributed = form.comm.size > 1
+    comm = form.comm
+    distributed = comm.size > 1
     history = []
     ring = np.zeros((GROWTH_POINTS, 2))
     last_tip = np.zeros(3)
