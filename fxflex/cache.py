@@ -3,8 +3,10 @@
 The folder is ``$FXFLEX_CACHE`` if set, else ``~/.cache/fxflex``, with one subfolder per kind
 (``meshes``, ``modes``, ``reduced``, ``tlf-invariants``). ``FXFLEX_NO_CACHE=1`` bypasses it: nothing
 is read or written and everything is computed afresh (``FXFLEX_NO_CACHE=modes,reduced`` bypasses
-only those kinds). ``fxflex cache info`` lists what is stored
-and ``fxflex cache clear [KIND]`` deletes it.
+only those kinds). Inside Python, ``with bypass(...)`` does the same for a block without touching
+the environment (a context variable that :func:`enabled` consults besides ``FXFLEX_NO_CACHE``), so
+that a bypass never leaks into other threads or child processes. ``fxflex cache info`` lists what
+is stored and ``fxflex cache clear [KIND]`` deletes it.
 
 Each entry is named by a hash of everything it depends on (:func:`entry_key`): the scene parts
 that matter, mesh divisions, quadrature degree, mode count, the library versions and the source
@@ -58,10 +60,26 @@ def cache_root() -> Path:
     return Path(os.environ.get("FXFLEX_CACHE") or Path.home() / ".cache" / "fxflex")
 
 
+#: the kinds barred by the innermost open :func:`bypass` block (None: no block open; ALL: every
+#: kind); a context variable, not ``os.environ``, so that a bypass stays in this process, thread
+#: and block
+_BYPASSED: contextvars.ContextVar[frozenset[str] | None] = contextvars.ContextVar(
+    "fxflex_cache_bypassed", default=None)
+#: what :func:`bypass` with no kind named bars
+_ALL = frozenset(KINDS)
+
+
 def enabled(kind: str | None = None) -> bool:
     """Whether ``kind`` may be read and written (no kind: whether every kind may).
-    ``FXFLEX_NO_CACHE`` unset, empty or 0 allows all, a comma-separated list of kinds
-    (``modes,reduced``) bars those, anything else (``1``) bars all."""
+
+    Barred by an open :func:`bypass` block naming it (or naming none), or by ``FXFLEX_NO_CACHE``:
+    unset, empty or 0 allows all, a comma-separated list of kinds (``modes,reduced``) bars those,
+    anything else (``1``) bars all. The environment variable is how a command line or a child
+    process is told; :func:`bypass` is how Python code is."""
+    barred = _BYPASSED.get()
+    if barred:
+        if kind is None or kind in barred:
+            return False
     value = os.environ.get("FXFLEX_NO_CACHE", "").strip()
     if value in ("", "0"):
         return True
@@ -74,16 +92,20 @@ def enabled(kind: str | None = None) -> bool:
 @contextlib.contextmanager
 def bypass(*kinds: str):
     """``with bypass("modes"):`` -- those kinds (all if none named) neither read nor written
-    inside the block (benchmarks of cold builds). Sets ``FXFLEX_NO_CACHE`` for the block."""
-    old = os.environ.get("FXFLEX_NO_CACHE")
-    os.environ["FXFLEX_NO_CACHE"] = ",".join(kinds) if kinds else "1"
+    inside the block (benchmarks of cold builds). Blocks nest (an inner block bars its kinds
+    besides the outer block's). ``os.environ`` is left alone: the bypass holds for this
+    process's code inside the block only; a child process started there is told with
+    ``FXFLEX_NO_CACHE`` in its environment."""
+    unknown = [k for k in kinds if k not in KINDS]
+    if unknown:
+        raise ValueError(f"cache.bypass: unknown kind(s) {', '.join(map(repr, unknown))}; "
+                         f"allowed: {', '.join(KINDS)}")
+    outer = _BYPASSED.get() or frozenset()
+    token = _BYPASSED.set(outer | (frozenset(kinds) if kinds else _ALL))
     try:
         yield
     finally:
-        if old is None:
-            del os.environ["FXFLEX_NO_CACHE"]
-        else:
-            os.environ["FXFLEX_NO_CACHE"] = old
+        _BYPASSED.reset(token)
 
 
 #: the (temporary file, entry) pairs published inside the innermost open :func:`deferred` block;

@@ -59,6 +59,52 @@ def test_no_cache_bypasses_reads_and_writes(folder, monkeypatch):
     assert cache.enabled("modes")
 
 
+def test_bypass_leaves_the_environment_alone(folder, monkeypatch):
+    """The in-process override: enabled() is False inside the block, os.environ is the same
+    object with the same contents, and FXFLEX_NO_CACHE still bars what it names."""
+    import os
+    import threading
+
+    cache.save("modes", "k1", {"a": np.zeros(2)})
+    before = dict(os.environ)
+    with cache.bypass():
+        assert dict(os.environ) == before and "FXFLEX_NO_CACHE" not in os.environ
+        assert not cache.enabled() and not any(cache.enabled(k) for k in cache.KINDS)
+        assert cache.load("modes", "k1") is None
+        assert cache.save("reduced", "k2", {"a": 1}) is None and not (folder / "reduced").exists()
+        seen = []                   # another thread has its own context: not bypassed
+        thread = threading.Thread(target=lambda: seen.append(cache.enabled("modes")))
+        thread.start()
+        thread.join()
+        assert seen == [True]
+    assert dict(os.environ) == before and cache.enabled() and cache.load("modes", "k1") is not None
+    with cache.bypass("modes"):
+        assert not cache.enabled("modes") and cache.enabled("reduced") and not cache.enabled()
+        with cache.bypass("reduced"):           # nested blocks add up
+            assert not cache.enabled("modes") and not cache.enabled("reduced")
+            assert cache.enabled("meshes")
+        assert not cache.enabled("modes") and cache.enabled("reduced")
+    with pytest.raises(RuntimeError), cache.bypass("modes"):    # an exception ends it too
+        raise RuntimeError
+    assert cache.enabled("modes")
+    monkeypatch.setenv("FXFLEX_NO_CACHE", "meshes")     # the environment still counts inside
+    with cache.bypass("modes"):
+        assert not cache.enabled("meshes") and not cache.enabled("modes")
+        assert cache.enabled("reduced") and os.environ["FXFLEX_NO_CACHE"] == "meshes"
+    with pytest.raises(ValueError, match="unknown kind"):
+        with cache.bypass("mode"):
+            pass
+
+
+def test_bypass_is_not_inherited_by_child_processes(folder):
+    """A child process (the CLI) sees the environment, not this process's bypass."""
+    code = "from fxflex import cache; print(cache.enabled('modes'))"
+    with cache.bypass("modes"):
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "True"
+
+
 def test_cache_command_lists_and_clears(folder):
     cache.save("modes", "k1", {"a": np.zeros(1000)})
     cache.save("reduced", "k2", {"a": np.zeros(10)})
