@@ -21,6 +21,7 @@ import os
 import sys
 import time
 import traceback
+from dataclasses import dataclass
 
 from fxflex import __version__
 from fxflex.cache import KINDS as CACHE_KINDS
@@ -251,9 +252,20 @@ def cmd_info(args, comm) -> None:
     _emit(comm, args, payload, "\n".join(lines))
 
 
+def _warn(comm, warnings: list[str], *notes: str | None) -> None:
+    """Gather a command's warnings: each note that is not None (the formulation's warnings, the
+    stability verdict's reason, a step note) joins ``warnings``, the payload's list, and is
+    logged from rank 0 (the notes are the same on every rank). ``steady`` and ``run`` use it."""
+    for note in notes:
+        if note:
+            warnings.append(note)
+            if comm.rank == 0:
+                log.warning(note)
+
+
 def cmd_steady(args, comm) -> None:
-    from fxflex.numerics.qep import verdict as stability_verdict
     from fxflex.formulation import build
+    from fxflex.numerics.qep import verdict as stability_verdict
     from fxflex.io import envelope, tip_mm
 
     scene = _scene_from_args(args)
@@ -266,9 +278,8 @@ def cmd_steady(args, comm) -> None:
     st = form.steady_state()
     t2 = time.perf_counter()
     verdict, why = stability_verdict(form, st)
-    warnings = list(form.warnings) + ([why] if why else [])
-    for note in warnings if comm.rank == 0 else []:
-        log.warning(note)
+    warnings: list[str] = []
+    _warn(comm, warnings, *form.warnings, why)
     timings = {"preprocess": t1 - t0, "solve": t2 - t1}
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        tip_mm=tip_mm(st.tip), stable=verdict, converged=st.converged,
@@ -285,28 +296,42 @@ def cmd_steady(args, comm) -> None:
         raise SystemExit(1)
 
 
-def cmd_run(args, comm) -> None:
-    from fxflex.numerics.qep import verdict as stability_verdict
-    from fxflex.formulation import BuildOptions, build, check_options, default_integration
-    from fxflex.io import Progress, SeriesWriter, envelope, tip_mm
-    from fxflex.io.checkpoint import (FORMAT, CheckpointWriter, Layout, check_settings,
-                                      load_checkpoint)
-    from fxflex.io.series import prefix_digest
-    from fxflex.time import Resume, diagnose, simulate
-    from fxflex.time.driver import step_to_end
-    from fxflex.time.diagnosis import ab2_warning
+@dataclass
+class _RunPlan:
+    """What ``run`` settles from its arguments before anything is built: the integration, the
+    sampling, the output paths and, with --resume, the checkpoint read back."""
 
-    scene = _scene_from_args(args)
-    options = BuildOptions(force_eval=args.force_eval, mass=args.mass, need_steady=False)
-    check_options(args.method, options)
+    integrator: str
+    dt: float
+    nsteps: int
+    rho_inf: float | None
+    sample_every: int
+    #: what a checkpoint records and a resume must match (fxflex.io.checkpoint.check_settings)
+    settings: dict
+    out_path: str | None
+    ckpt_path: str | None
+    ckpt_every: int | None
+    #: the checkpoint's metadata and arrays (rank 0), its series record, with --resume
+    resumed: dict | None
+    arrays: dict | None
+    series: dict | None
+    warnings: list[str]
+
+
+def _run_integration(args, scene, comm, warnings: list[str]
+                     ) -> tuple[str, float, int, float | None]:
+    """(integrator, dt, steps, rho_inf): the paper's integration unless given, the step shortened
+    to end exactly at --t-end (a warning says so), rho_inf for generalized-alpha only."""
+    from fxflex.formulation import default_integration
+    from fxflex.time.driver import step_to_end
+
     integrator, asked = default_integration(args.method, args.integrator, args.dt,
                                             scene.rotation.rpm)
     dt, nsteps = step_to_end(args.t_end, asked)
-    warnings = []
     if args.dt is not None and dt != asked:
-        warnings.append(f"--dt {asked:g} s does not divide --t-end {args.t_end:g} s: the step was "
-                        f"shortened to {dt:.9g} s ({nsteps} steps) to end at t_end")
-        log.warning(warnings[-1])
+        _warn(comm, warnings,
+              f"--dt {asked:g} s does not divide --t-end {args.t_end:g} s: the step was "
+              f"shortened to {dt:.9g} s ({nsteps} steps) to end at t_end")
     rho_inf = None
     if integrator == "generalized-alpha":
         from fxflex.time.implicit import DEFAULT_RHO_INF
@@ -317,12 +342,23 @@ def cmd_run(args, comm) -> None:
     elif args.rho_inf is not None:
         raise FxflexError(f"--rho-inf: only applies to --integrator generalized-alpha "
                           f"(the integrator is {integrator})")
+    return integrator, dt, nsteps, rho_inf
+
+
+def _plan_run(args, scene, comm) -> _RunPlan:
+    """Check every argument of ``run`` and resolve the outputs, before anything is built: the
+    integration, --resume (the checkpoint read back and its settings matched), the sampling,
+    the checkpoint path and interval, and every output path (:func:`_check_run_paths`)."""
+    from fxflex.io.checkpoint import check_settings, load_checkpoint
+
+    warnings: list[str] = []
+    integrator, dt, nsteps, rho_inf = _run_integration(args, scene, comm, warnings)
     if args.fields_every < 1:
         raise FxflexError(f"--fields-every: must be >= 1, got {args.fields_every}")
     if args.checkpoint_every is not None and args.checkpoint_every < 1:
         raise FxflexError(f"--checkpoint-every: must be >= 1 step, got {args.checkpoint_every}")
     out_path, ckpt_path, ckpt_every = args.out, args.checkpoint, args.checkpoint_every
-    resumed = series = None
+    resumed = arrays = series = None
     if args.resume is not None:
         if args.fields:
             raise FxflexError("--fields: cannot be combined with --resume (an XDMF series "
@@ -350,12 +386,24 @@ def cmd_run(args, comm) -> None:
         ckpt_path = out_path + ".ckpt"
     if ckpt_path is not None and ckpt_every is None:
         ckpt_every = max(nsteps // 20, 1)         # every 5 % of the run
+    plan = _RunPlan(integrator, dt, nsteps, rho_inf, sample_every, settings, out_path, ckpt_path,
+                    ckpt_every, resumed, arrays, series, warnings)
+    _check_run_paths(args, comm, plan)
+    return plan
+
+
+def _check_run_paths(args, comm, plan: _RunPlan) -> None:
+    """Every output of ``run`` writable and no input overwritten (:mod:`fxflex.io.paths`); on a
+    resume, the series on disk begins with the bytes the checkpoint recorded. Collective."""
+    from fxflex.io.series import prefix_digest
+
     fields_h5 = (os.path.splitext(args.fields)[0] + ".h5",) if args.fields else ()
-    check_paths(comm, [Output("--out", out_path), Output("--fields", args.fields, suffix=".xdmf",
-                                                         beside=fields_h5),
-                       Output("--checkpoint", ckpt_path)],
+    check_paths(comm, [Output("--out", plan.out_path),
+                       Output("--fields", args.fields, suffix=".xdmf", beside=fields_h5),
+                       Output("--checkpoint", plan.ckpt_path)],
                 inputs={"--scene": args.scene, "--resume": args.resume},
                 may_replace=(("--checkpoint", "--resume"),))
+    series, out_path = plan.series, plan.out_path
     if series is not None:
         ok = None
         if comm.rank == 0:
@@ -365,16 +413,17 @@ def cmd_run(args, comm) -> None:
             raise FxflexError(f"--resume: {out_path} does not begin with the {series['bytes']} "
                               "bytes the checkpoint recorded (a different or shortened file); "
                               "pass the run's series with --out")
-    t0 = time.perf_counter()
-    form = build(args.method, scene, comm, options)
-    for note in form.warnings:
-        warnings.append(note)
-        log.warning(note)
-    t_pre = time.perf_counter() - t0
-    settings.update(force_eval=form.force_eval, mass=form.mass_kind)
-    if resumed is not None:
-        check_settings(resumed, scene.to_dict(), scene.hash, settings, args.resume)
-    layout = Layout(form) if (ckpt_path or resumed) else None
+
+
+def _restart(comm, plan: _RunPlan, form):
+    """(layout, state, resume): the checkpoint's distributed layout when one is written or read,
+    and with --resume the state (q, v) and the integrator's history scattered to this
+    partition. Collective."""
+    from fxflex.io.checkpoint import Layout
+    from fxflex.time import Resume
+
+    resumed, arrays = plan.resumed, plan.arrays
+    layout = Layout(form) if (plan.ckpt_path or resumed) else None
     state = resume = None
     if resumed is not None:
         state = (layout.scatter(arrays["q"] if comm.rank == 0 else None),
@@ -384,33 +433,55 @@ def cmd_run(args, comm) -> None:
         history = {n: layout.scatter(arrays[f"scheme/{n}"] if comm.rank == 0 else None)
                    for n in names}
         resume = Resume(step=resumed["step"], arrays=history, samples=resumed["samples"])
+    return layout, state, resume
+
+
+def _open_outputs(args, comm, scene, plan: _RunPlan, form, layout, implicit: dict):
+    """(fields, series writer, checkpoint writer), each None when not asked for: the XDMF
+    fields of the formulation, the CSV series (rank 0 writes; continued on a resume) and the
+    checkpoint file."""
+    from fxflex.io import SeriesWriter, envelope
+    from fxflex.io.checkpoint import FORMAT, CheckpointWriter
+
     fields = None
     if args.fields:
         if form.field_writer is None:
             raise FxflexError(f"--fields: not available for {args.method} (solid methods only)")
         fields = form.field_writer(args.fields)
-    extra_cols = list(form.extra_columns)
-    columns = ["t_s", "longitudinal_m", "orthogonal_m", "load_m"] + extra_cols
-    implicit = {"rho_inf": rho_inf} if rho_inf is not None else {}
-    meta = envelope(scene, method=args.method, integrator=integrator, dt_s=dt, **implicit,
-                    t_end_s=args.t_end, dof=form.dof, force_eval=settings["force_eval"],
-                    mass=settings["mass"])
+    columns = ["t_s", "longitudinal_m", "orthogonal_m", "load_m"] + list(form.extra_columns)
+    settings, series = plan.settings, plan.series
+    meta = envelope(scene, method=args.method, integrator=plan.integrator, dt_s=plan.dt,
+                    **implicit, t_end_s=args.t_end, dof=form.dof,
+                    force_eval=settings["force_eval"], mass=settings["mass"])
     writer = None
-    if out_path:
-        writer = _agreed(comm, SeriesWriter, out_path, meta, columns, enabled=comm.rank == 0,
+    if plan.out_path:
+        writer = _agreed(comm, SeriesWriter, plan.out_path, meta, columns,
+                         enabled=comm.rank == 0,
                          resume=(series["bytes"], series["sha256"]) if series else None)
     checkpoint = None
-    if ckpt_path:
+    if plan.ckpt_path:
+        resumed = plan.resumed
         checkpoint = CheckpointWriter(
-            ckpt_path, layout, {"format": FORMAT, "fxflex_version": __version__,
-                                "scene": scene.to_dict(), "scene_hash": scene.hash,
-                                "settings": settings, "layout": layout.kind, "ranks": comm.size,
-                                "dof": form.dof, "series": None,
-                                "checkpoint": {"path": os.path.abspath(ckpt_path),
-                                               "every": ckpt_every}},
+            plan.ckpt_path, layout, {"format": FORMAT, "fxflex_version": __version__,
+                                     "scene": scene.to_dict(), "scene_hash": scene.hash,
+                                     "settings": settings, "layout": layout.kind,
+                                     "ranks": comm.size, "dof": form.dof, "series": None,
+                                     "checkpoint": {"path": os.path.abspath(plan.ckpt_path),
+                                                    "every": plan.ckpt_every}},
             series=writer,
             last=(os.path.abspath(args.resume), resumed["step"]) if resumed else None)
-    progress = Progress(nsteps, f"{args.method} {integrator} dt={dt:.3g}",
+    return fields, writer, checkpoint
+
+
+def _simulate_with_outputs(args, comm, form, plan: _RunPlan, state, resume, fields, writer,
+                           checkpoint):
+    """The run itself, samples going to the series and every --fields-every-th to the fields.
+    Both are closed when it ends; when it fails, an output failure leaves no half-written series
+    and anything else keeps what was computed, flushed."""
+    from fxflex.io import Progress
+    from fxflex.time import simulate
+
+    progress = Progress(plan.nsteps, f"{args.method} {plan.integrator} dt={plan.dt:.3g}",
                         enabled=comm.rank == 0)
 
     count = [0]
@@ -423,13 +494,14 @@ def cmd_run(args, comm) -> None:
         count[0] += 1
 
     try:
-        res = simulate(form, integrator, dt, args.t_end, sample_every=sample_every,
+        res = simulate(form, plan.integrator, plan.dt, args.t_end,
+                       sample_every=plan.sample_every,
                        on_sample=on_sample if writer or fields else None, progress=progress,
-                       extras=writer is not None, rho_inf=rho_inf, state=state, resume=resume,
-                       checkpoint_every=ckpt_every or 0, on_checkpoint=checkpoint)
+                       extras=writer is not None, rho_inf=plan.rho_inf, state=state,
+                       resume=resume, checkpoint_every=plan.ckpt_every or 0,
+                       on_checkpoint=checkpoint)
     except BaseException as exc:
-        # an output that failed leaves no half-written series; anything else keeps what was
-        # computed, flushed. Collective clean-up only when every rank is here together.
+        # Collective clean-up only when every rank is here together.
         if writer is not None:
             if isinstance(exc, OutputError):
                 writer.abandon()
@@ -446,21 +518,18 @@ def cmd_run(args, comm) -> None:
     if fields is not None:
         fields.close()
     progress.close(f"{res.steps} steps" + (" (interrupted)" if res.interrupted else ""))
-    diverged = diagnose(form, integrator, dt, res) if res.diverged else None
-    if diverged is None and integrator == "ab2" and not res.interrupted:
-        note = ab2_warning(form, dt, res.t)
-        if note:
-            warnings.append(note)
-            log.warning(note)
-    if rho_inf is not None:
-        implicit["newton"] = res.stats
-    verdict, why = (None, None) if res.interrupted else stability_verdict(form)
-    if why:                                     # of the equilibrium at the final speed
-        warnings.append(why)
-        log.warning(why)
+    return res
+
+
+def _run_report(args, scene, form, plan: _RunPlan, res, resume, checkpoint, implicit: dict,
+                diverged, verdict, t_pre: float) -> tuple[dict, str]:
+    """(payload, text) of ``run``: the JSON of SPEC section 8 and the human summary."""
+    from fxflex.io import envelope, tip_mm
+
+    integrator, dt, out_path, warnings = plan.integrator, plan.dt, plan.out_path, plan.warnings
     first = resume.step if resume else 0
     ckpt_info = None if checkpoint is None else {
-        "path": checkpoint.path, "every": ckpt_every, "written": checkpoint.written,
+        "path": checkpoint.path, "every": plan.ckpt_every, "written": checkpoint.written,
         "seconds": checkpoint.seconds}
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        integrator=integrator, dt_s=dt, **implicit, t_end_s=args.t_end, t_s=res.t,
@@ -478,10 +547,11 @@ def cmd_run(args, comm) -> None:
                if res.steps > first else ""))
     if resume:
         text += f"\n  resumed from step {resume.step} of {args.resume}"
-    if rho_inf is not None:
+    if plan.rho_inf is not None:
         st = res.stats
-        text += (f"\n  generalized-alpha rho_inf {rho_inf:g}: {st['iterations']} Newton iterations, "
-                 f"{st['factorizations']} factorisations, {st['halvings']} step halvings")
+        text += (f"\n  generalized-alpha rho_inf {plan.rho_inf:g}: {st['iterations']} Newton "
+                 f"iterations, {st['factorizations']} factorisations, {st['halvings']} step "
+                 f"halvings")
     if res.interrupted:
         text += f"\n  INTERRUPTED: the deflection above is the last checked, t={res.t:.6g} s"
     if diverged:
@@ -494,6 +564,44 @@ def cmd_run(args, comm) -> None:
         text += f"\n  series: {out_path}"
     if checkpoint is not None:
         text += f"\n  checkpoints: {checkpoint.written} written to {checkpoint.path}"
+    return payload, text
+
+
+def cmd_run(args, comm) -> None:
+    """Plan (every argument checked, outputs resolved), build, restore a checkpoint, open the
+    outputs, integrate, diagnose, report (SPEC section 8)."""
+    from fxflex.formulation import BuildOptions, build, check_options
+    from fxflex.io.checkpoint import check_settings
+    from fxflex.numerics.qep import verdict as stability_verdict
+    from fxflex.time import diagnose
+    from fxflex.time.diagnosis import ab2_warning
+
+    scene = _scene_from_args(args)
+    options = BuildOptions(force_eval=args.force_eval, mass=args.mass, need_steady=False)
+    check_options(args.method, options)
+    plan = _plan_run(args, scene, comm)
+    warnings, integrator, dt = plan.warnings, plan.integrator, plan.dt
+    t0 = time.perf_counter()
+    form = build(args.method, scene, comm, options)
+    _warn(comm, warnings, *form.warnings)
+    t_pre = time.perf_counter() - t0
+    plan.settings.update(force_eval=form.force_eval, mass=form.mass_kind)
+    if plan.resumed is not None:
+        check_settings(plan.resumed, scene.to_dict(), scene.hash, plan.settings, args.resume)
+    layout, state, resume = _restart(comm, plan, form)
+    implicit = {"rho_inf": plan.rho_inf} if plan.rho_inf is not None else {}
+    fields, writer, checkpoint = _open_outputs(args, comm, scene, plan, form, layout, implicit)
+    res = _simulate_with_outputs(args, comm, form, plan, state, resume, fields, writer,
+                                 checkpoint)
+    diverged = diagnose(form, integrator, dt, res) if res.diverged else None
+    if diverged is None and integrator == "ab2" and not res.interrupted:
+        _warn(comm, warnings, ab2_warning(form, dt, res.t))
+    if plan.rho_inf is not None:
+        implicit["newton"] = res.stats
+    verdict, why = (None, None) if res.interrupted else stability_verdict(form)
+    _warn(comm, warnings, why)                  # of the equilibrium at the final speed
+    payload, text = _run_report(args, scene, form, plan, res, resume, checkpoint, implicit,
+                                diverged, verdict, t_pre)
     _emit(comm, args, payload, text)
     if res.interrupted:
         raise SystemExit(EXIT_INTERRUPT)

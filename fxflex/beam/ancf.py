@@ -27,7 +27,10 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from fxflex.beam.elements import ANCF_SLOTS, ancf_tables, gauss
+from fxflex.beam.ancf_elements import (DPN, QUADRATURE, SLOTS, assemble_blocks, elastic_tensors,
+                                       elasticity_matrix, line_load, prism_quadrature,
+                                       reference_coordinates, reference_gradients, scalar_mass)
+from fxflex.beam.elements import ancf_tables
 from fxflex.beam.invariants import GramChain
 from fxflex.beam.line import beam_line, twist_check
 from fxflex.formulation import FORCE_EVAL, BuildOptions, FormulationBase, SteadyState
@@ -41,61 +44,10 @@ from fxflex.scene.kinematics import P3, S3, rotation_z
 __all__ = ["build", "dof_count", "ANCF", "constrained_slots", "QUADRATURE", "elasticity_matrix",
            "reference_coordinates"]
 
-#: Gauss points per element: along X~, Y~, Z~ (the paper's 5 x 3 x 3)
-QUADRATURE = (5, 3, 3)
-SLOTS = len(ANCF_SLOTS)
-DPN = 3 * SLOTS
-
 
 def constrained_slots(scene: Scene) -> tuple[int, ...]:
     """Root-node slots prescribed by the drive: all but dr/dX~ ("free-axial") or all ("full")."""
     return tuple(range(SLOTS)) if scene.mesh.ancf_root == "full" else (0, 2, 3, 4, 5, 6)
-
-
-def elasticity_matrix(scene: Scene) -> np.ndarray:
-    """Isotropic 6 x 6 matrix of moduli, Voigt order xx yy zz xy yz zx, engineering shears."""
-    lam, mu = scene.material.lame
-    C = np.zeros((6, 6))
-    C[:3, :3] = lam
-    C[:3, :3] += 2 * mu * np.eye(3)
-    C[3:, 3:] = mu * np.eye(3)
-    return C
-
-
-def reference_coordinates(scene: Scene) -> np.ndarray:
-    """e0: (n_nodes, 7, 3) reference nodal coordinates of the tapered twisted beam."""
-    line = beam_line(scene, 1)
-    g = scene.geometry
-    b, h, th = line.shape.sizes(line.x_nodes)
-    e0 = np.zeros((line.n_nodes, SLOTS, 3))
-    e0[:, 0, 0] = g.hub_radius + line.x_nodes
-    e0[:, 1, 0] = 1.0
-    e0[:, 2, 1], e0[:, 2, 2] = b / g.root_y * np.cos(th), b / g.root_y * np.sin(th)
-    e0[:, 3, 1], e0[:, 3, 2] = -h / g.root_z * np.sin(th), h / g.root_z * np.cos(th)
-    return e0
-
-
-def _voigt_linear(nx: np.ndarray) -> np.ndarray:
-    """B_L (..., 6, 3m): linear Green strain per coordinate (slot a, component i), Eq. 30."""
-    shape = nx.shape[:-2]
-    m = nx.shape[-2]
-    B = np.zeros(shape + (6, m, 3))
-    for i in range(3):
-        B[..., i, :, i] = nx[..., i]
-    for v, (j, k) in zip((3, 4, 5), ((0, 1), (1, 2), (2, 0))):
-        B[..., v, :, j] = nx[..., k]
-        B[..., v, :, k] = nx[..., j]
-    return B.reshape(shape + (6, 3 * m))
-
-
-def _voigt_pairs(nx: np.ndarray) -> np.ndarray:
-    """w_ab (..., 6, m, m): the Green strain of a unit Gram entry P_ab (times 2 on the normal
-    components), so that eps_N = 1/2 sum_ab P_ab w_ab."""
-    out = [np.einsum("...a,...b->...ab", nx[..., i], nx[..., i]) for i in range(3)]
-    for j, k in ((0, 1), (1, 2), (2, 0)):
-        out.append(np.einsum("...a,...b->...ab", nx[..., j], nx[..., k])
-                   + np.einsum("...a,...b->...ab", nx[..., k], nx[..., j]))
-    return np.stack(out, axis=-3)
 
 
 class ANCF(FormulationBase):
@@ -118,58 +70,30 @@ class ANCF(FormulationBase):
         self.c_rho = scene.damping.c / rho
         self.absolute = scene.damping.model == "absolute"
         self.warnings = twist_check(scene, "ancf")
-        g = scene.geometry
         line = self.line = beam_line(scene, QUADRATURE[0])
         n_el, n_nodes, le = line.n_el, line.n_nodes, line.le
         self.n_slots, self.n_full = SLOTS * n_nodes, DPN * n_nodes
         self.e0n = reference_coordinates(scene)
         self.e0 = self.e0n.reshape(-1).copy()
-        # quadrature points: tensor Gauss rule on the prism
-        (xa, wa), (yb, wb), (zc, wc) = (gauss(n) for n in QUADRATURE)
-        yb, zc = (yb - 0.5) * g.root_y, (zc - 0.5) * g.root_z
-        X, Y, Z = (a.ravel() for a in np.meshgrid(xa, yb, zc, indexing="ij"))
-        wq = np.einsum("a,b,c->abc", wa * le, wb * g.root_y, wc * g.root_z).ravel()
+        # element arrays (fxflex.beam.ancf_elements): Gauss rule on the prism, reference
+        # Jacobian, Green-strain tensors of the elastic force, scalar mass, line load
+        X, Y, Z, wq = prism_quadrature(scene, le)
         tab = self.tab = ancf_tables(X, Y, Z, le)
-        # reference Jacobian dx0/dX~ (Eq. 30: derivatives w.r.t. x0 through its inverse)
-        e0e = np.stack([self.e0n[:-1], self.e0n[1:]], axis=1).reshape(n_el, 2 * SLOTS, 3)
-        J = np.einsum("eai,qaj->eqij", e0e, tab.dN)
-        self.detJ = np.linalg.det(J)
-        nx = np.einsum("qaj,eqji->eqai", tab.dN, np.linalg.inv(J))
+        self.detJ, nx = reference_gradients(self.e0n, tab)
         dV = self.detJ * wq
         C = self.C = elasticity_matrix(scene)
-        BL = _voigt_linear(nx)                                         # (n_el, nq, 6, 42)
-        W = _voigt_pairs(nx)                                           # (n_el, nq, 6, 14, 14)
-        CBL = np.einsum("vw,eqwk->eqvk", C, BL)
-        self.KLe = np.einsum("eq,eqvk,eqvl->ekl", dV, BL, CBL)
-        T1 = np.matmul((CBL * dV[..., None, None]).reshape(n_el, -1, 2 * DPN).transpose(0, 2, 1),
-                       W.reshape(n_el, -1, (2 * SLOTS) ** 2)).reshape(n_el, 2 * DPN, 2 * SLOTS,
-                                                                    2 * SLOTS)
-        Wf = W.reshape(n_el, -1, 6, (2 * SLOTS) ** 2)
-        CWf = np.einsum("vw,eqwB->eqvB", C, Wf * dV[..., None, None])
-        T4 = np.matmul(Wf.reshape(n_el, -1, (2 * SLOTS) ** 2).transpose(0, 2, 1),
-                       CWf.reshape(n_el, -1, (2 * SLOTS) ** 2)).reshape((n_el,) + (2 * SLOTS,) * 4)
+        self.KLe, T1, T4 = elastic_tensors(C, nx, dV)
         emap = np.arange(2 * DPN).reshape(2 * SLOTS, 3)
         self.engine = GramChain(T1, T4, dpn=DPN, spn=SLOTS, emap=emap, esign=np.ones(emap.shape),
                                 system=self.force_eval == "invariant")
         self.quad = {"nx": nx, "dV": dV}                               # for checks
         # linear stiffness and scalar mass (Eq. 54: M = Ms x I_3), assembled
-        KL = np.zeros((self.n_full, self.n_full))
-        Ms = np.zeros((self.n_slots, self.n_slots))
-        Mse = rho * np.einsum("eq,qa,qb->eab", np.broadcast_to(dV, (n_el, len(wq))), tab.N, tab.N)
-        for e in range(n_el):
-            KL[DPN * e:DPN * (e + 2), DPN * e:DPN * (e + 2)] += self.KLe[e]
-            Ms[SLOTS * e:SLOTS * (e + 2), SLOTS * e:SLOTS * (e + 2)] += Mse[e]
+        KL = assemble_blocks(self.KLe, DPN, self.n_full)
+        Ms = assemble_blocks(scalar_mass(rho, dV, tab.N), SLOTS, self.n_slots)
         self.KL_dense, self.Ms = KL, Ms
         self.KL = sp.csr_matrix(KL)
         self.Ms_csr = sp.csr_matrix(Ms)
-        # centerline line load (Eq. 43 analogue): f = q int N(X~, 0, 0)^T e_z dX~
-        xl, wl = gauss(QUADRATURE[0])
-        cl = ancf_tables(xl, np.zeros_like(xl), np.zeros_like(xl), le).N   # (nq, 14)
-        fe = scene.load.line_load * le * np.einsum("q,qa->a", wl, cl)
-        fq = np.zeros((n_nodes, SLOTS, 3))
-        fq[:-1, :, 2] += fe[:SLOTS]
-        fq[1:, :, 2] += fe[SLOTS:]
-        self.fq = fq.reshape(-1)
+        self.fq = line_load(scene, le, n_nodes)
         self.tip_dofs = slice(self.n_full - DPN, self.n_full - DPN + 3)
         self.Ftip = np.asarray(scene.load.tip_force, float)
         # root constraint: constrained slots follow the drive

@@ -58,10 +58,11 @@ from fxflex.scene import Drive, Scene
 if TYPE_CHECKING:                   # a cache hit needs neither PETSc nor dolfinx: imported on use
     from petsc4py import PETSc
 
+    from fxflex.io.fields import FieldWriter
     from fxflex.solid.model import SolidModel
 
 __all__ = ["nodal", "mat_apply", "inner", "tip_rows", "MeshData", "mesh_data",
-           "AffineStack", "RotatingSystem", "ReducedFormulation", "ModalFieldWriter",
+           "AffineStack", "RotatingSystem", "ReducedFormulation",
            "rotation_weights", "ab2_root", "reduced_key", "load_reduced", "save_reduced"]
 
 
@@ -340,10 +341,24 @@ class ReducedFormulation(FormulationBase):
                            timings={"solve": time.perf_counter() - t0},
                            extra={"modes": int(self.dof)})
 
-    def field_writer(self, path: str) -> "ModalFieldWriter":
-        """``--fields``: an XDMF series of the displacement field rebuilt from the modal state
-        (collective on the communicator the model was built on)."""
-        return ModalFieldWriter(self, path)
+    def field_writer(self, path: str) -> FieldWriter:
+        """``--fields``: an XDMF series of the displacement field rebuilt from the modal state,
+        U in O-XYZ and u = A U in o-xyz (:mod:`fxflex.io.fields`). Collective on the build
+        communicator: every rank writes the same replicated state."""
+        from fxflex.io.fields import FieldWriter
+        from fxflex.scene.kinematics import rotation_z
+
+        m = self.model
+        drive = self.drive
+        basis, inertial = self.nodal_basis()
+
+        def displacement(t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            d = (basis @ q).reshape(-1, 3)
+            A = rotation_z(drive.angle(t))
+            u, U = (d, d @ A) if inertial else (d @ A.T, d)
+            return u.reshape(-1), U.reshape(-1)
+
+        return FieldWriter(m.comm, m.V, path, displacement)
 
     def nodal_basis(self) -> tuple[np.ndarray, bool]:
         """(B, inertial): this rank's owned displacement entries are B q, measured in o-xyz when
@@ -430,37 +445,3 @@ def rotation_weights(phi: float) -> tuple[float, float, float, float]:
     """(cos phi, sin phi, cos 2 phi, sin 2 phi)."""
     c, s = math.cos(phi), math.sin(phi)
     return c, s, c * c - s * s, 2.0 * s * c
-
-
-class ModalFieldWriter:
-    """Writes the deformation U in O-XYZ and u = A U in o-xyz (names ``U_hub`` and ``u``, as the
-    TLF writer) at each call, to one XDMF/HDF5 pair. Every rank of the build communicator must
-    call ``write`` (with the same replicated state) and ``close``."""
-
-    def __init__(self, form: ReducedFormulation, path: str):
-        from dolfinx import fem
-        from dolfinx.io import XDMFFile
-
-        from fxflex.scene.kinematics import rotation_z
-
-        m = form.model
-        self._rotation = rotation_z
-        self.drive = form.drive
-        self.basis, self.inertial = form.nodal_basis()
-        self.file = XDMFFile(m.comm, path, "w")
-        self.file.write_mesh(m.mesh)
-        self.u, self.U = fem.Function(m.V, name="u"), fem.Function(m.V, name="U_hub")
-        self.n = m.n_owned
-
-    def write(self, t: float, q: np.ndarray) -> None:
-        d = (self.basis @ q).reshape(-1, 3)
-        A = self._rotation(self.drive.angle(t))
-        u, U = (d, d @ A) if self.inertial else (d @ A.T, d)
-        self.u.x.array[: self.n] = u.reshape(-1)
-        self.U.x.array[: self.n] = U.reshape(-1)
-        for f in (self.u, self.U):
-            f.x.scatter_forward()
-            self.file.write_function(f, t)
-
-    def close(self) -> None:
-        self.file.close()

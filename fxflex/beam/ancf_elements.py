@@ -1,0 +1,145 @@
+"""ANCF element arrays as pure functions (paper Sect. 3.3, Eq. 52-57): the reference coordinates,
+the Gauss rule on the prism, the reference Jacobian, the Green-strain tensors of the elastic force,
+the scalar mass and the line load. No state, no solver: :class:`fxflex.beam.ancf.ANCF` calls them
+once when it is built (STYLE habit 3, as :mod:`fxflex.solid.forms` does for the UFL forms).
+
+Element coordinates are ordered (node, slot, component): 2 nodes x SLOTS slots x 3 components,
+2 DPN in all; the slots are :data:`fxflex.beam.elements.ANCF_SLOTS` (Eq. 50-51).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fxflex.beam.elements import ANCF_SLOTS, AncfTables, ancf_tables, gauss
+from fxflex.beam.line import beam_line
+from fxflex.scene import Scene
+
+__all__ = ["QUADRATURE", "SLOTS", "DPN", "elasticity_matrix", "reference_coordinates",
+           "voigt_linear", "voigt_pairs", "prism_quadrature", "reference_gradients",
+           "elastic_tensors", "scalar_mass", "assemble_blocks", "line_load"]
+
+#: Gauss points per element: along X~, Y~, Z~ (the paper's 5 x 3 x 3)
+QUADRATURE = (5, 3, 3)
+#: position-gradient slots per node (Eq. 51, n = 2)
+SLOTS = len(ANCF_SLOTS)
+#: coordinates per node
+DPN = 3 * SLOTS
+
+
+def elasticity_matrix(scene: Scene) -> np.ndarray:
+    """Isotropic 6 x 6 matrix of moduli, Voigt order xx yy zz xy yz zx, engineering shears."""
+    lam, mu = scene.material.lame
+    C = np.zeros((6, 6))
+    C[:3, :3] = lam
+    C[:3, :3] += 2 * mu * np.eye(3)
+    C[3:, 3:] = mu * np.eye(3)
+    return C
+
+
+def reference_coordinates(scene: Scene) -> np.ndarray:
+    """e0: (n_nodes, 7, 3) reference nodal coordinates of the tapered twisted beam."""
+    line = beam_line(scene, 1)
+    g = scene.geometry
+    b, h, th = line.shape.sizes(line.x_nodes)
+    e0 = np.zeros((line.n_nodes, SLOTS, 3))
+    e0[:, 0, 0] = g.hub_radius + line.x_nodes
+    e0[:, 1, 0] = 1.0
+    e0[:, 2, 1], e0[:, 2, 2] = b / g.root_y * np.cos(th), b / g.root_y * np.sin(th)
+    e0[:, 3, 1], e0[:, 3, 2] = -h / g.root_z * np.sin(th), h / g.root_z * np.cos(th)
+    return e0
+
+
+def voigt_linear(nx: np.ndarray) -> np.ndarray:
+    """B_L (..., 6, 3m): linear Green strain per coordinate (slot a, component i), Eq. 30."""
+    shape = nx.shape[:-2]
+    m = nx.shape[-2]
+    B = np.zeros(shape + (6, m, 3))
+    for i in range(3):
+        B[..., i, :, i] = nx[..., i]
+    for v, (j, k) in zip((3, 4, 5), ((0, 1), (1, 2), (2, 0))):
+        B[..., v, :, j] = nx[..., k]
+        B[..., v, :, k] = nx[..., j]
+    return B.reshape(shape + (6, 3 * m))
+
+
+def voigt_pairs(nx: np.ndarray) -> np.ndarray:
+    """w_ab (..., 6, m, m): the Green strain of a unit Gram entry P_ab (times 2 on the normal
+    components), so that eps_N = 1/2 sum_ab P_ab w_ab."""
+    out = [np.einsum("...a,...b->...ab", nx[..., i], nx[..., i]) for i in range(3)]
+    for j, k in ((0, 1), (1, 2), (2, 0)):
+        out.append(np.einsum("...a,...b->...ab", nx[..., j], nx[..., k])
+                   + np.einsum("...a,...b->...ab", nx[..., k], nx[..., j]))
+    return np.stack(out, axis=-3)
+
+
+def prism_quadrature(scene: Scene, le: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(X~, Y~, Z~, w): the tensor Gauss rule of QUADRATURE on one element's straight prism
+    [0, le] x [-b0/2, b0/2] x [-h0/2, h0/2] (b0, h0 the root sizes), X~ slowest."""
+    g = scene.geometry
+    (xa, wa), (yb, wb), (zc, wc) = (gauss(n) for n in QUADRATURE)
+    yb, zc = (yb - 0.5) * g.root_y, (zc - 0.5) * g.root_z
+    X, Y, Z = (a.ravel() for a in np.meshgrid(xa, yb, zc, indexing="ij"))
+    wq = np.einsum("a,b,c->abc", wa * le, wb * g.root_y, wc * g.root_z).ravel()
+    return X, Y, Z, wq
+
+
+def reference_gradients(e0n: np.ndarray, tab: AncfTables) -> tuple[np.ndarray, np.ndarray]:
+    """(det J, nx) per element and Gauss point: J = dx0/dX~ of the reference configuration e0
+    (n_nodes, SLOTS, 3), and nx the shape-function gradients with respect to x0 through J^-1
+    (Eq. 30 differentiates the strain in the reference configuration)."""
+    n_el = e0n.shape[0] - 1
+    e0e = np.stack([e0n[:-1], e0n[1:]], axis=1).reshape(n_el, 2 * SLOTS, 3)
+    J = np.einsum("eai,qaj->eqij", e0e, tab.dN)
+    detJ = np.linalg.det(J)
+    nx = np.einsum("qaj,eqji->eqai", tab.dN, np.linalg.inv(J))
+    return detJ, nx
+
+
+def elastic_tensors(C: np.ndarray, nx: np.ndarray, dV: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(K_L^e, T1, T4) per element (Eq. 55, 57): the linear stiffness int B_L^T C B_L dV, and the
+    tensors of the Green-strain expansion the invariant engine contracts with the Gram entries,
+    T1 = int (C B_L)^T w dV (2 DPN, 2 SLOTS, 2 SLOTS) and T4 = int w^T C w dV (2 SLOTS)^4, with
+    B_L of :func:`voigt_linear` and w of :func:`voigt_pairs`; dV = det J x Gauss weight."""
+    n_el = nx.shape[0]
+    BL = voigt_linear(nx)                                          # (n_el, nq, 6, 42)
+    W = voigt_pairs(nx)                                            # (n_el, nq, 6, 14, 14)
+    CBL = np.einsum("vw,eqwk->eqvk", C, BL)
+    KLe = np.einsum("eq,eqvk,eqvl->ekl", dV, BL, CBL)
+    T1 = np.matmul((CBL * dV[..., None, None]).reshape(n_el, -1, 2 * DPN).transpose(0, 2, 1),
+                   W.reshape(n_el, -1, (2 * SLOTS) ** 2)).reshape(n_el, 2 * DPN, 2 * SLOTS,
+                                                                2 * SLOTS)
+    Wf = W.reshape(n_el, -1, 6, (2 * SLOTS) ** 2)
+    CWf = np.einsum("vw,eqwB->eqvB", C, Wf * dV[..., None, None])
+    T4 = np.matmul(Wf.reshape(n_el, -1, (2 * SLOTS) ** 2).transpose(0, 2, 1),
+                   CWf.reshape(n_el, -1, (2 * SLOTS) ** 2)).reshape((n_el,) + (2 * SLOTS,) * 4)
+    return KLe, T1, T4
+
+
+def scalar_mass(rho: float, dV: np.ndarray, N: np.ndarray) -> np.ndarray:
+    """M_s^e = int rho N_a N_b dV per element (Eq. 54, M = M_s (x) I_3): (n_el, 2 SLOTS, 2 SLOTS)."""
+    n_el, nq = dV.shape[0], N.shape[0]
+    return rho * np.einsum("eq,qa,qb->eab", np.broadcast_to(dV, (n_el, nq)), N, N)
+
+
+def assemble_blocks(Ke: np.ndarray, block: int, n: int) -> np.ndarray:
+    """The dense n x n sum of the element matrices Ke (n_el, 2 block, 2 block), element e on the
+    rows and columns block e .. block (e + 2) (consecutive elements share a node)."""
+    K = np.zeros((n, n))
+    for e in range(Ke.shape[0]):
+        K[block * e:block * (e + 2), block * e:block * (e + 2)] += Ke[e]
+    return K
+
+
+def line_load(scene: Scene, le: float, n_nodes: int) -> np.ndarray:
+    """f = q int N(X~, 0, 0)^T e_z dX~ (the centerline line load, Eq. 43 analogue), assembled:
+    (n_nodes * DPN,)."""
+    xl, wl = gauss(QUADRATURE[0])
+    cl = ancf_tables(xl, np.zeros_like(xl), np.zeros_like(xl), le).N   # (nq, 14)
+    fe = scene.load.line_load * le * np.einsum("q,qa->a", wl, cl)
+    fq = np.zeros((n_nodes, SLOTS, 3))
+    fq[:-1, :, 2] += fe[:SLOTS]
+    fq[1:, :, 2] += fe[SLOTS:]
+    return fq.reshape(-1)

@@ -1,0 +1,46 @@
+"""Field output (``--fields``): the displacement on the mesh as an XDMF/HDF5 series for ParaView.
+
+One writer for every solid formulation. What a formulation knows is how its state q becomes
+nodal displacements; that is the callable it passes, ``displacement(t, q) -> (u, U)``, this rank's
+owned entries of u in the inertial frame o-xyz and of U in the hub frame O-XYZ (U = A^T (x0 + u)
+- x0 for TLF, the modal sum for FFRF and GCMS). The writer holds the file and the two named
+functions, ``u`` and ``U_hub``, on the formulation's function space. It imports no formulation,
+so :mod:`fxflex.io` stays below :mod:`fxflex.solid`.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+from dolfinx import fem
+
+__all__ = ["Displacement", "FieldWriter"]
+
+#: (t, q) -> (u in o-xyz, U in O-XYZ), this rank's owned entries of the function space
+Displacement = Callable[[float, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+class FieldWriter:
+    """Writes u (name ``u``) and U (name ``U_hub``) at each ``write(t, q)`` to one XDMF/HDF5 pair
+    at ``path``. Collective on ``comm``: every rank opens the same path and calls ``write`` and
+    ``close`` (the HDF5 writes are collective)."""
+
+    def __init__(self, comm, V: fem.FunctionSpace, path: str, displacement: Displacement):
+        from dolfinx.io import XDMFFile
+
+        self.displacement = displacement
+        self.file = XDMFFile(comm, path, "w")
+        self.file.write_mesh(V.mesh)
+        self.u, self.U = fem.Function(V, name="u"), fem.Function(V, name="U_hub")
+
+    def write(self, t: float, q: np.ndarray) -> None:
+        u, U = self.displacement(t, q)
+        self.u.x.array[: u.size] = u
+        self.U.x.array[: U.size] = U
+        for f in (self.u, self.U):
+            f.x.scatter_forward()
+            self.file.write_function(f, t)
+
+    def close(self) -> None:
+        self.file.close()

@@ -1,0 +1,73 @@
+"""TLF steady state: the rotating-frame equilibrium of the St.Venant-Kirchhoff solid.
+
+Steady state (SPEC section 6, NOTES.md): in the rotating frame, with U = A^T x - x0,
+
+    int S(E(U)) : dE dV - Omega^2 int rho P (X0 + U) . dU dV = F . dU,
+
+St.Venant-Kirchhoff material, the centrifugal load acting on the deformed position, solved by
+Newton's method with the Jacobian from ``ufl.derivative`` (geometric stiffness and spin softening
+included). The absolute damping model adds its circulatory (c/rho) Omega int rho (S U) . dU (Eq. 68
+seen from the hub, SPEC section 5), non-symmetric: Newton then factorises with LU. Above the speed
+where the unstressed K_L - Omega^2 M_P loses definiteness the first Newton step would follow the
+unstable linear mode, so the speed is raised in stages (continuation in Omega^2), each stage
+starting from the previous equilibrium.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import ufl
+from dolfinx import fem
+
+from fxflex.formulation import SteadyState
+from fxflex.solid import forms
+from fxflex.solid.model import SolidModel
+from fxflex.solid.petsc import newton
+
+__all__ = ["tlf_steady"]
+
+#: highest speed reached in one Newton solve from the undeformed state (rad/s); above it the
+#: continuation raises Omega^2 in equal stages (1000 rpm default scene needs 1, 10000 rpm needs 3)
+_STAGE_OMEGA = 2 * math.pi * 6000 / 60
+
+
+def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1e-10,
+               max_it: int = 30) -> SteadyState:
+    """Rotating-frame TLF equilibrium at speed omega (rad/s; default the scene's)."""
+    omega = model.scene.rotation.omega if omega is None else omega
+    t0 = time.perf_counter()
+    U = fem.Function(model.V)
+    v, du = model.u_test, model.u_trial
+    w2 = fem.Constant(model.mesh, 0.0)
+    R = (forms.svk_residual(model.scene.material, U, v, model.dx)
+         - w2 * forms.centrifugal(model.rho, model.X0 + U, v, model.dx))
+    damping = model.scene.damping
+    absolute = damping.model == "absolute" and damping.c > 0
+    if absolute:                    # the circulatory (c/rho) Omega M_S U of Eq. 68 (SPEC 5)
+        w1 = fem.Constant(model.mesh, 0.0)
+        R = R + w1 * (damping.c / model.rho) * forms.mass_S(model.rho, U, v, model.dx)
+    J = ufl.derivative(R, U, du)
+    F_ext = model.rotating_load()
+    t_setup = time.perf_counter() - t0
+    stages = max(1, math.ceil((omega / _STAGE_OMEGA) ** 2))
+    residuals, iterations, converged = [], 0, True
+    timings = {"setup": t_setup, "assemble": 0.0, "factor_solve": 0.0}
+    for k in range(1, stages + 1):
+        w2.value = omega**2 * k / stages
+        if absolute:
+            w1.value = math.sqrt(w2.value)
+        res = newton(R, J, U, [model.bc], rhs=F_ext, rtol=rtol, max_it=max_it,
+                     symmetric=not absolute)
+        residuals = res.residuals
+        iterations += res.iterations
+        for key in ("assemble", "factor_solve"):
+            timings[key] += res.timings[key]
+        if not res.converged:
+            converged = False
+            break
+    tip = model.tip_displacement(U.x.array)
+    return SteadyState(tip=tip, q=U.x.array[: model.n_owned].copy(), iterations=iterations,
+                       residuals=residuals, converged=converged, timings=timings,
+                       extra={"continuation_stages": stages})
