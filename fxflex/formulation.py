@@ -85,6 +85,15 @@ class Dynamics(Protocol):
     comm: object                        # mpi4py communicator of the state arrays
     dof: int                            # global number of unknowns after constraints
     timings: dict[str, float]           # preprocessing breakdown (s)
+    #: the state is a mesh field distributed over ``comm`` (TLF: tens of thousands of unknowns,
+    #: PETSc operators), not a small dense model replicated on every rank: studies rebuild it
+    #: rather than keep one per speed, time its steps on a short run and skip its eigen-analysis
+    #: where no verdict is asked for
+    distributed: bool
+    #: the coordinates are at rest at the rotating steady state: (steady.q, q' = 0) is the
+    #: equilibrium's state at phi = 0. False where they turn with the body there (absolute
+    #: coordinates: GCMS's xi' = Omega J xi, TLF's and ANCF's nodal ones)
+    steady_at_rest: bool
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
         """(q0, v0): undeformed body in rigid rotation at phi(0), phi'(0) (NOTES.md)."""
@@ -180,6 +189,9 @@ class RotatingAnalysis(Protocol):
     """Modes and stability about the rotating steady state (SPEC section 6, docs/stability.md)."""
 
     stability_note: str | None          # why ``stable()`` is None, when it is
+    #: ``eigenvalues()`` are every root of the linearised system (dense, LAPACK); False: only
+    #: the lowest (TLF's SLEPc PEP), so the highest frequency is ``omega_max()``'s
+    all_roots: bool
 
     def linearise(self, steady: SteadyState | None = None) -> Linearisation:
         """The motion linearised about ``steady`` (default: the scene's own steady state)."""
@@ -256,6 +268,9 @@ class FormulationBase:
 
     options: BuildOptions = BuildOptions()
     warnings: tuple[str, ...] = ()
+    distributed: bool = False
+    steady_at_rest: bool = True
+    all_roots: bool = True
     stability_note: str | None = None
     force_eval: str | None = None
     mass_kind: str | None = None
@@ -321,7 +336,9 @@ class FormulationBase:
            model: str | None = None) -> "Formulation":
         """The same method and build options for this scene at another constant speed, damping
         coefficient or damping model. This default builds afresh (meshes, modes and invariants
-        come from the cache); methods that can share more override it."""
+        come from the cache); methods that can share more override it (FFRF, GCMS). The beams
+        keep it: a rebuild costs 20 to 60 ms (LEBB, NEBB, ANCF on the default scene), less than
+        one steady state; so does TLF, whose SolidModel holds the scene's speed and damping."""
         return build(self.method, rescene(self.scene, rpm=rpm, damping=damping, model=model),
                      self.comm, self.options)
 

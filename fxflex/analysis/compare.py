@@ -31,304 +31,39 @@ Runs that share everything but the window run once, over the longest window.
 Outputs: ``report.md`` (rewritten after every study), ``steady.csv``, ``damping_steady.csv``,
 ``transients.csv`` (one summary row per run), ``paper.csv`` (SPEC section 7 rows),
 ``results.json``, ``series/*.csv`` (each run's samples, written as it runs) and the PNG figures.
+
+This module runs the studies (:class:`Compare`); what they run is in
+:mod:`~fxflex.analysis.compare_plan`, the formulations they share in
+:mod:`~fxflex.analysis.compare_cache`, the SPEC section 7 rows in
+:mod:`~fxflex.analysis.compare_paper`, the files in :mod:`~fxflex.analysis.compare_output` and
+the figures in :mod:`~fxflex.analysis.compare_figures`.
 """
+
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 import os
 import time
-from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from fxflex.analysis.report import HOW
+from fxflex.analysis import compare_figures as figures
+from fxflex.analysis.compare_cache import FormCache
+from fxflex.analysis.compare_output import transient_row, write_csv, write_results
+from fxflex.analysis.compare_paper import paper_rows
+from fxflex.analysis.compare_plan import (C3, DAMPING_RPM, GROWTH_LIMIT, PAPER_WINDOW,
+                                          SAMPLE_DT, TLF_WINDOWS, SteadyRow, plan, steady_time)
 from fxflex.analysis.transient import Case, CaseResult, run_case, summarise
 from fxflex.formulation import PAPER_INTEGRATION, BuildOptions, build
-from fxflex.io.report import COMPONENTS, envelope, jsonable
+from fxflex.io.report import envelope
 from fxflex.scene import METHODS, PAPER_DAMPING, PAPER_RPM, Scene
 
 __all__ = ["SteadyRow", "paper_rows", "run_compare", "plan", "steady_time", "PAPER_WINDOW",
-           "TLF_WINDOWS", "Compare"]
+           "TLF_WINDOWS", "SAMPLE_DT", "Compare", "FormCache"]
 
-#: the window used for the paper's figures where the paper's text gives none (s)
-PAPER_WINDOW = 0.02
-#: TLF's default windows per study (s); ``--full`` uses PAPER_WINDOW
-TLF_WINDOWS = {"speeds": 2e-3, "steps": 1e-3, "damping": 1e-3}
-#: sampling interval of every transient (s)
-SAMPLE_DT = 5e-6
-#: the paper's damping study: methods, speeds, and GCMS's step there (Sect. 4.3)
-DAMPING_METHODS = ("gcms", "tlf", "ancf")
-DAMPING_RPM = (PAPER_RPM[0], PAPER_RPM[2])
-DAMPING_STEP = {"gcms": 0.1e-6}
-#: how far a run about an unstable equilibrium may grow (m): far enough for a clean growth rate
-GROWTH_LIMIT = 100.0
-#: the step study's multiples of the paper step (Fig. 5: half, selected, slightly larger)
-STEP_FACTORS = (0.5, 1.0, 1.2)
-LINEAR = ("ffrf", "gcms", "lebb")
-C3 = PAPER_DAMPING[2]
-
-
-@dataclass
-class SteadyRow:
-    method: str
-    rpm: float
-    tip_m: np.ndarray
-    stable: bool | None
-    converged: bool
-    dof: int
-    seconds: float
-    c: float = C3
-    model: str = "relative"
-    growth_rate: float | None = None
-    sigma_max: float | None = None      # root-section sigma_X, Pa
-    sigma_min: float | None = None
-    torque: float | None = None         # drive torque at the equilibrium, N m
-    extra: dict = field(default_factory=dict)
-
-    def as_dict(self) -> dict:
-        d = {k: v for k, v in asdict(self).items() if k not in ("tip_m", "extra")}
-        d["tip_mm"] = [float(x) if math.isfinite(x) else None for x in 1e3 * self.tip_m]
-        return d
-
-
-def steady_time(scene: Scene) -> float:
-    """A time after the load ramp at which the hub has turned a whole number of times: there the
-    method's state equals the steady state's q (given at phi = 0) with the full load."""
-    ramp, w = scene.load.ramp_time, scene.rotation.omega
-    if w == 0.0:
-        return max(ramp, 0.0)
-    period = 2.0 * math.pi / w
-    return period * max(1, math.ceil(ramp / period))
-
-
-def plan(methods, full: bool, paper_window: float = PAPER_WINDOW,
-         tlf_windows: dict | None = None) -> dict[str, list[Case]]:
-    """The transients of studies 3-5 (module docstring) for ``methods``; the windows can be
-    shortened (tests)."""
-    tlf_windows = tlf_windows or TLF_WINDOWS
-
-    def window(method, study):
-        return paper_window if full or method != "tlf" else tlf_windows[study]
-
-    out = {"speeds": [], "steps": [], "damping": []}
-    for m in methods:
-        integ, dt = PAPER_INTEGRATION[m]
-        for rpm in PAPER_RPM:
-            out["speeds"].append(Case(m, rpm, C3, "relative", integ, dt, window(m, "speeds")))
-        for f in STEP_FACTORS:
-            out["steps"].append(Case(m, PAPER_RPM[0], C3, "relative", integ, f * dt,
-                                     window(m, "steps")))
-        if m == "tlf":
-            out["steps"].append(Case(m, PAPER_RPM[0], C3, "relative", integ, 1.2 * dt,
-                                     window(m, "steps"), mass="consistent"))
-        if m in DAMPING_METHODS:
-            step = DAMPING_STEP.get(m, dt)
-            for model in ("relative", "absolute"):
-                for rpm in DAMPING_RPM:
-                    for c in PAPER_DAMPING:
-                        out["damping"].append(Case(m, rpm, c, model, integ, step,
-                                                   window(m, "damping")))
-    return out
-
-
-# -- SPEC section 7 ------------------------------------------------------------------------------
-
-def _tip(rows, method, rpm, c=C3, model="relative"):
-    for r in rows:
-        if (r.method, r.rpm, r.c, r.model) == (method, rpm, c, model):
-            return r.tip_m
-    return None
-
-
-def _pct_smaller(a, b):
-    """How much smaller a is than b, in % of b."""
-    return 100.0 * (1.0 - a / b)
-
-
-def _pct_diff(a, b):
-    return 100.0 * abs(a / b - 1.0)
-
-
-def paper_rows(rows, damping=None, transients=None, efficiency=None) -> list[dict]:
-    """SPEC section 7 figures: ours next to the paper's, with pass/FAIL.
-
-    ``rows``: steady states at the paper speeds (c3, relative); ``damping``: the damping study's
-    equilibria; ``transients``: {("speeds"|"steps"|..., Case.key): summary}; ``efficiency``: the
-    spot check's per-step times. ``kind`` says how a figure is compared (``HOW``): ``value``
-    (a reported change or difference: ours within 1 point of it), ``bound`` ("X within Y % of
-    Z": ours at most Y; "almost the same" (GCMS vs FFRF) read as 0.5 %), ``approximate`` (within
-    10 %), ``verdict`` (the same yes/no), ``zero``, ``trend`` (the sign of a change), ``speedup``.
-    """
-    o1, o2, o3 = PAPER_RPM
-    out = []
-
-    def add(label, fn, paper, kind, *needs):
-        tips = [_tip(rows, m, r) for m, r in needs]
-        if any(t is None for t in tips):
-            return
-        ours = float(fn(*tips))
-        ok = abs(ours - paper) <= 1.0 if kind == "value" else ours <= paper
-        out.append({"figure": label, "ours": ours, "paper": paper, "kind": kind, "pass": ok})
-
-    for i, comp in enumerate(COMPONENTS):
-        add(f"LEBB vs FFRF, {comp}, Omega1 (|diff| %)",
-            lambda a, b, i=i: _pct_diff(a[i], b[i]), 1.5, "bound", ("lebb", o1), ("ffrf", o1))
-        add(f"GCMS vs FFRF, {comp}, Omega1 (|diff| %)",
-            lambda a, b, i=i: _pct_diff(a[i], b[i]), 0.5, "bound", ("gcms", o1), ("ffrf", o1))
-        add(f"NEBB vs TLF, {comp}, Omega1 (|diff| %)",
-            lambda a, b, i=i: _pct_diff(a[i], b[i]), 1.3, "bound", ("nebb", o1), ("tlf", o1))
-    for i, (comp, paper) in enumerate(zip(COMPONENTS, (1.7, 4.0, 1.5))):
-        add(f"ANCF vs TLF, {comp}, Omega1 (|diff| %)",
-            lambda a, b, i=i: _pct_diff(a[i], b[i]), paper, "bound", ("ancf", o1), ("tlf", o1))
-    add("Omega1: TLF orthogonal smaller than FFRF (%)",
-        lambda a, b: _pct_smaller(a[1], b[1]), 12.7, "value", ("tlf", o1), ("ffrf", o1))
-    add("Omega1: TLF load smaller than FFRF (%)",
-        lambda a, b: _pct_smaller(a[2], b[2]), 8.9, "value", ("tlf", o1), ("ffrf", o1))
-    add("Omega2: TLF orthogonal smaller than FFRF (%)",
-        lambda a, b: _pct_smaller(a[1], b[1]), 91.8, "value", ("tlf", o2), ("ffrf", o2))
-    add("Omega2: TLF load smaller than FFRF (%)",
-        lambda a, b: _pct_smaller(a[2], b[2]), 72.9, "value", ("tlf", o2), ("ffrf", o2))
-    add("FFRF orthogonal increase Omega1->Omega2 (%)",
-        lambda a, b: 100 * (b[1] / a[1] - 1), 118.7, "value", ("ffrf", o1), ("ffrf", o2))
-    add("FFRF load increase Omega1->Omega2 (%)",
-        lambda a, b: 100 * (b[2] / a[2] - 1), 8.28, "value", ("ffrf", o1), ("ffrf", o2))
-    add("TLF orthogonal decrease Omega1->Omega2 (%)",
-        lambda a, b: _pct_smaller(b[1], a[1]), 79.6, "value", ("tlf", o1), ("tlf", o2))
-    add("TLF load decrease Omega1->Omega2 (%)",
-        lambda a, b: _pct_smaller(b[2], a[2]), 67.8, "value", ("tlf", o1), ("tlf", o2))
-    for r, paper in ((o2, 25.0), (o3, 100.0)):
-        tips = (_tip(rows, "tlf", o1), _tip(rows, "tlf", r))
-        if all(t is not None for t in tips):
-            ratio = float(tips[1][0] / tips[0][0])
-            out.append({"figure": f"TLF longitudinal {r:g} rpm / 1000 rpm (ratio)",
-                        "ours": ratio, "paper": paper, "kind": "approximate",
-                        "pass": abs(ratio / paper - 1) <= 0.1})
-    for r in rows:
-        if r.rpm == o3 and r.c == C3 and r.model == "relative" and r.stable is not None:
-            expected = r.method not in LINEAR
-            out.append({"figure": f"{r.method.upper()} converges at Omega3: stable equilibrium "
-                                  f"(eigenvalues)", "ours": r.stable, "paper": expected,
-                        "kind": "verdict", "pass": r.stable == expected})
-    for (study, key), s in (transients or {}).items():
-        if study == "speeds" and key[1] == o3:
-            expected = key[0] not in LINEAR
-            bounded = s["diverged"] is None
-            win = s["case"]["t_end"]
-            out.append({"figure": f"{key[0].upper()} converges at Omega3: transient bounded over "
-                                  f"{win * 1e3:g} ms", "ours": bounded, "paper": expected,
-                        "kind": "verdict", "pass": bounded == expected})
-    out += _damping_rows(damping or [])
-    out += _efficiency_rows(efficiency or {})
-    out += _step_rows(transients or {})
-    for f in out:
-        f["pass"] = None if f["pass"] is None else bool(f["pass"])
-        if isinstance(f["ours"], (np.floating, np.bool_)):
-            f["ours"] = f["ours"].item()
-    return out
-
-
-def _spread(rows, method, rpm, model, k):
-    vals = [r.tip_m[k] for r in rows if (r.method, r.rpm, r.model) == (method, rpm, model)]
-    vals = np.array(sorted(vals, key=abs)) if vals else np.array([])
-    if len(vals) < 2:
-        return None
-    return 100.0 * (vals.max() - vals.min()) / max(np.abs(vals).max(), 1e-300)
-
-
-def _damping_rows(rows) -> list[dict]:
-    """Sect. 4.3 / SPEC section 7 damping figures from the equilibria at c1..c3."""
-    out = []
-    if not rows:
-        return out
-    methods = sorted({r.method for r in rows}, key=METHODS.index)
-    rel = [s for m in methods for rpm in DAMPING_RPM for k in range(3)
-           if (s := _spread(rows, m, rpm, "relative", k)) is not None]
-    if rel:
-        out.append({"figure": "Relative model: convergent deflection independent of c (largest "
-                              "spread over c1..c3, all methods and components, Omega1 and Omega3,"
-                              " %)", "ours": max(rel), "paper": 0.0, "kind": "zero",
-                    "pass": max(rel) < 1e-6})
-    absd = [s for m in methods for rpm in DAMPING_RPM
-            if (s := _spread(rows, m, rpm, "absolute", 1)) is not None]
-    if absd:
-        out.append({"figure": "Absolute model: convergent orthogonal deflection depends on c "
-                              "(smallest spread over c1..c3, all methods, Omega1 and Omega3, %)",
-                    "ours": min(absd), "paper": "> 0", "kind": "trend",
-                    "pass": min(absd) > 1e-6})
-
-    def orth(m, rpm):
-        pts = sorted((r.c, r.tip_m[1]) for r in rows
-                     if (r.method, r.rpm, r.model) == (m, rpm, "absolute"))
-        return [y for _, y in pts]
-
-    shown = [m for m in ("gcms", "tlf", "ancf") if m in methods]
-    if shown:
-        d = {m: orth(m, DAMPING_RPM[0]) for m in shown}
-        ok = all(len(v) == 3 and v[0] > v[1] > v[2] for v in d.values())
-        out.append({"figure": "Absolute model, Omega1: orthogonal deflection slightly decreases "
-                              "as c grows (" + ", ".join(m.upper() for m in shown) + "; c3 - c1,"
-                              " mm)", "ours": ", ".join(f"{1e3 * (v[-1] - v[0]):+.2e}"
-                                                        for v in d.values() if v),
-                    "paper": "decreases", "kind": "trend", "pass": ok})
-    shown = [m for m in ("tlf", "ancf") if m in methods]
-    if shown:
-        d = {m: orth(m, DAMPING_RPM[1]) for m in shown}
-        ok = all(len(v) == 3 and abs(v[0]) < abs(v[1]) < abs(v[2]) for v in d.values())
-        out.append({"figure": "Absolute model, Omega3: |orthogonal| grows with c (" +
-                              ", ".join(m.upper() for m in shown) + "; |c3| / |c1|)",
-                    "ours": ", ".join(f"{abs(v[-1] / v[0]):.3f}" for v in d.values() if v),
-                    "paper": "grows", "kind": "trend", "pass": ok})
-    g = sorted((r.c, r.growth_rate) for r in rows if (r.method, r.rpm, r.model)
-               == ("gcms", DAMPING_RPM[1], "relative") and r.growth_rate is not None)
-    if len(g) == 3:
-        rates = [x for _, x in g]
-        out.append({"figure": "GCMS at Omega3: larger c decelerates the divergence (Sect. 4.3; "
-                              "growth rate at c1 / c2 / c3, 1/s)",
-                    "ours": " / ".join(f"{x:.4f}" for x in rates), "paper": "decreases",
-                    "kind": "trend", "pass": rates[0] > rates[1] > rates[2]})
-    return out
-
-
-def _efficiency_rows(eff: dict) -> list[dict]:
-    out = []
-    for method, paper, kind_ok in (("ancf", ">= 10", lambda r: r >= 10.0),
-                                   ("tlf", ">= 10", lambda r: r >= 10.0),
-                                   ("nebb", "slight (> 1)", lambda r: 1.0 < r < 2.0)):
-        e = eff.get(method)
-        if e:
-            out.append({"figure": f"Sect. 4.2: {method.upper()}-{e['integrator'].upper()} speed-up "
-                                  f"of system invariant matrices over per-step integration "
-                                  f"({e['without']} / invariant time per step)",
-                        "ours": e["ratio"], "paper": paper, "kind": "speedup",
-                        "pass": kind_ok(e["ratio"])})
-    return out
-
-
-def _step_rows(transients: dict) -> list[dict]:
-    """The step study's claims (Sect. 4.1 text; Fig. 5), not in SPEC section 7."""
-    out = []
-    steps = {key: s for (study, key), s in transients.items() if study == "steps"}
-    diffs = {}
-    for key, s in steps.items():
-        if s.get("vs_half") is not None and math.isclose(s["case"]["dt"],
-                                                         PAPER_INTEGRATION[key[0]][1]):
-            diffs[key[0]] = s["vs_half"]
-    if diffs:
-        worst = max(diffs.values())
-        out.append({"figure": "Fig. 5: half the paper step stays close to the paper step (largest "
-                              "max|difference| / peak of the orthogonal deflection, all methods)",
-                    "ours": worst, "paper": "close", "kind": "trend", "pass": worst < 0.05})
-    for key, s in steps.items():
-        if key[0] == "ffrf" and math.isclose(s["case"]["dt"], 0.6e-6):
-            bounded = s["diverged"] is None
-            out.append({"figure": f"Fig. 5: FFRF-AB at 0.6 us goes numerically infinite "
-                                  f"(within {s['case']['t_end'] * 1e3:g} ms)",
-                        "ours": not bounded, "paper": True, "kind": "verdict",
-                        "pass": not bounded})
-    return out
+#: the figures of each transient study (:mod:`fxflex.analysis.compare_figures`)
+FIGURES = {"speeds": figures.speeds, "steps": figures.steps, "damping": figures.damping}
 
 
 # -- the study ----------------------------------------------------------------------------------
@@ -344,8 +79,7 @@ class Compare:
         self.out_dir, self.comm, self.full = out_dir, comm, full
         self.root = comm.rank == 0
         self._say = say
-        self._forms: dict = {}
-        self._family = None
+        self.forms = FormCache(self.base, comm)
         self.steady: list[SteadyRow] = []
         self.damping: list[SteadyRow] = []
         self.results: dict = {}             # Case.key -> CaseResult
@@ -369,51 +103,34 @@ class Compare:
         return os.path.join(self.out_dir, name) if self.out_dir else None
 
     def scene_for(self, rpm: float, c: float = C3, model: str = "relative") -> Scene:
-        return self.base.replace(**{"rotation.rpm": float(rpm), "damping.c": float(c),
-                                    "damping.model": model})
-
-    def family(self):
-        if self._family is None:
-            from fxflex.solid.family import ReducedFamily
-            r = self.base.reduction
-            self._family = ReducedFamily(self.base, self.comm,
-                                         count=max(r.ffrf_modes, r.gcms_modes // 3))
-        return self._family
+        return self.forms.scene(rpm, c, model)
 
     def form(self, method: str, rpm: float, c: float = C3, model: str = "relative",
              mass: str | None = None):
-        """The method built for the scene at (rpm, c, model); the small ones are kept (FFRF and
-        GCMS share one mesh and its modes), TLF is rebuilt (its mesh is read from the cache)."""
-        key = (method, rpm, c, model, mass)
-        if key in self._forms:
-            return self._forms[key]
-        sc = self.scene_for(rpm, c, model)
-        if method in ("ffrf", "gcms"):
-            form = self.family().build_scene(method, sc)
-        else:
-            form = build(method, sc, self.comm, BuildOptions(mass=mass))
-        if method != "tlf":
-            self._forms[key] = form
-        return form
+        """The method for the scene at (rpm, c, model) (:class:`FormCache`: the small ones are
+        kept and share what does not depend on the speed, a distributed one is rebuilt)."""
+        return self.forms.get(method, rpm, c, model, mass)
 
     # -- steady states ------------------------------------------------------------------------
-    def steady_row(self, method, rpm, c=C3, model="relative", stability: bool = True
-                   ) -> SteadyRow:
+    def steady_row(self, method, rpm, c=C3, model="relative", stability: bool = True,
+                   distributed_stability: bool = True) -> SteadyRow:
         """The equilibrium at (rpm, c, model) with what the report gives about it; the
-        eigenvalue analysis (``stable``, ``growth_rate``, where offered) only if ``stability``."""
+        eigenvalue analysis (``stable``, ``growth_rate``, where offered) only if ``stability``,
+        and for a distributed model (``form.distributed``) only if ``distributed_stability``."""
         t0 = time.perf_counter()
         form = self.form(method, rpm, c, model)
         st = form.steady_state()
-        decide = stability and st.converged
+        decide = (stability and st.converged
+                  and (distributed_stability or not form.distributed))
         stable = form.stable(st) if decide else None             # None: undecided
         growth = float(form.growth_rate()[0]) if decide else None
         sig = torque = None
         t_st = steady_time(form.scene)
         if st.converged and form.root_stress is not None:
             sig = form.root_stress(t_st, st.q)
-        if st.converged and form.extras is not None and method != "gcms":
-            # relative coordinates at rest in the rotating frame: q, q' = 0 (GCMS's absolute
-            # coordinates move at the equilibrium, xi' = Omega J xi: not evaluated here)
+        if st.converged and form.extras is not None and form.steady_at_rest:
+            # coordinates at rest in the rotating frame: q, q' = 0 (absolute coordinates move at
+            # the equilibrium, GCMS's xi' = Omega J xi: not evaluated there)
             torque = float(form.extras(t_st, np.array(st.q, float), np.zeros(form.dof))[0])
         return SteadyRow(method=method, rpm=float(rpm), tip_m=np.asarray(st.tip, float),
                          stable=stable, converged=bool(st.converged), dof=int(form.dof),
@@ -426,10 +143,11 @@ class Compare:
     def probe(self, method: str) -> None:
         """Per-step cost of the method with the sampling of the studies (a short run)."""
         integ, dt = PAPER_INTEGRATION[method]
-        n = 40 if method == "tlf" else 400
         t0 = time.perf_counter()
         form = self.form(method, PAPER_RPM[0])
-        build_s = time.perf_counter() - t0 if method == "tlf" else 0.0
+        # a distributed model: a few ms per step, and rebuilt for every run (FormCache)
+        n = 40 if form.distributed else 400
+        build_s = time.perf_counter() - t0 if form.distributed else 0.0
         res = run_case(form, Case(method, PAPER_RPM[0], C3, "relative", integ, dt, n * dt),
                        sample_dt=SAMPLE_DT, csv_path=None, meta={}, enabled=False)
         self.costs[method] = {"us_per_step": 1e6 * res.wall_s / max(res.steps, 1),
@@ -464,17 +182,15 @@ class Compare:
             for rpm in DAMPING_RPM:
                 for model in ("relative", "absolute"):
                     for c in PAPER_DAMPING:
-                        # TLF's eigenvalue analysis (27300 unknowns) only at the three speeds
-                        row = self.steady_row(m, rpm, c, model, stability=m != "tlf")
+                        # a distributed model's eigenvalue analysis (TLF: 27300 unknowns)
+                        # only at the three speeds
+                        row = self.steady_row(m, rpm, c, model, distributed_stability=False)
                         self.damping.append(row)
                         self._log_steady(row)
             self._write_csv("damping_steady.csv", [r.as_dict() for r in self.damping])
         self.timings["damping_steady"] = time.perf_counter() - t0
         if self.root and self.out_dir and self.damping:
-            from fxflex.analysis.plots import damping_steady_figure
-            damping_steady_figure(self.path("damping_steady.png"),
-                                  [r.as_dict() for r in self.damping], DAMPING_RPM)
-            self.figures.append("damping_steady.png")
+            figures.damping_steady(self)
 
     # -- transients ---------------------------------------------------------------------------
     def schedule(self) -> tuple[dict, dict]:
@@ -515,7 +231,7 @@ class Compare:
             if case.key not in self.results:
                 self.results[case.key] = self._run(run)
             res = self.results[case.key]
-            steady = self._steady_of(case)
+            steady = self.steady_of(case)
             s = summarise(res, case.t_end, None if steady is None else steady.tip_m,
                           None if steady is None else steady.growth_rate)
             self.summaries[(study, case.key)] = s
@@ -523,12 +239,12 @@ class Compare:
         if study == "steps":
             self._compare_steps(cases)
         self.timings[study] = time.perf_counter() - t0
-        self._write_csv("transients.csv", [_flat(study, s) for (study, _), s in
+        self._write_csv("transients.csv", [transient_row(study, s) for (study, _), s in
                                            self.summaries.items()])
         if self.root and self.out_dir:
-            getattr(self, f"_figures_{study}")(cases)
+            FIGURES[study](self, cases)
 
-    def _steady_of(self, case: Case) -> SteadyRow | None:
+    def steady_of(self, case: Case) -> SteadyRow | None:
         for r in self.steady + self.damping:
             if (r.method, r.rpm, r.c, r.model) == (case.method, case.rpm, case.c, case.model):
                 return r
@@ -542,7 +258,7 @@ class Compare:
         path = self.path(os.path.join("series", case.name + ".csv"))
         meta = envelope(form.scene, method=case.method, integrator=case.integrator, dt_s=case.dt,
                         t_end_s=case.t_end, dof=form.dof, mass=case.mass)
-        steady = self._steady_of(case)
+        steady = self.steady_of(case)
         unstable = steady is not None and steady.stable is False and case.mass is None
         return run_case(form, case, sample_dt=SAMPLE_DT, csv_path=path, meta=meta,
                         enabled=self.root, limit=GROWTH_LIMIT if unstable else None)
@@ -572,66 +288,6 @@ class Compare:
             y = np.interp(a[:, 0], b[:, 0], b[:, 2])
             peak = np.max(np.abs(a[:, 2]))
             s["vs_half"] = float(np.max(np.abs(y - a[:, 2])) / peak) if peak > 0 else None
-
-    # -- figures ------------------------------------------------------------------------------
-    def _figures_speeds(self, cases):
-        from fxflex.analysis.plots import speed_figure, torque_figure
-
-        names = {PAPER_RPM[0]: "fig4", PAPER_RPM[1]: "fig6", PAPER_RPM[2]: "fig7"}
-        torque = {}
-        for rpm in PAPER_RPM:
-            runs, steady = {}, {}
-            for c in cases:
-                if c.rpm != rpm:
-                    continue
-                d = _bounded(self.results[c.key], c.t_end)
-                s = self.summaries[("speeds", c.key)]
-                runs[c.method] = (d[:, 0], d[:, 1:4], s["diverged"])
-                st = self._steady_of(c)
-                if st is not None:
-                    steady[c.method] = st.tip_m
-                if "drive_torque_Nm" in self.results[c.key].columns:
-                    k = self.results[c.key].columns.index("drive_torque_Nm")
-                    torque.setdefault(rpm, {})[c.method] = (d[:, 0], d[:, k])
-            name = f"{names[rpm]}_{rpm:g}rpm.png"
-            speed_figure(self.path(name), rpm, runs, steady, f"Fig. {names[rpm][3:]} equivalent")
-            self.figures.append(name)
-        if torque:
-            torque_figure(self.path("drive_torque.png"), torque)
-            self.figures.append("drive_torque.png")
-
-    def _figures_steps(self, cases):
-        from fxflex.analysis.plots import steps_figure
-
-        panels = {}
-        for c in cases:
-            d = _bounded(self.results[c.key], c.t_end)
-            label = f"{c.dt * 1e6:.4g} us" + (f" {c.mass}" if c.mass else "")
-            panels.setdefault(c.method, []).append(
-                (label, d[:, 0], d[:, 2], self.summaries[("steps", c.key)]["diverged"]))
-        steps_figure(self.path("fig5_steps.png"), panels)
-        self.figures.append("fig5_steps.png")
-
-    def _figures_damping(self, cases):
-        from fxflex.analysis.plots import damping_figure
-
-        names = {("relative", DAMPING_RPM[0]): "fig8", ("relative", DAMPING_RPM[1]): "fig9",
-                 ("absolute", DAMPING_RPM[0]): "fig10", ("absolute", DAMPING_RPM[1]): "fig11"}
-        for (model, rpm), fig in names.items():
-            panels = {}
-            for c in cases:
-                if (c.model, c.rpm) != (model, rpm):
-                    continue
-                d = _bounded(self.results[c.key], c.t_end)
-                st = self._steady_of(c)
-                panels.setdefault(c.method, []).append(
-                    (c.c, d[:, 0], d[:, 2], None if st is None else st.tip_m[1],
-                     self.summaries[("damping", c.key)]["diverged"]))
-            if panels:
-                name = f"{fig}_{model}_{rpm:g}rpm.png"
-                damping_figure(self.path(name), f"Fig. {fig[3:]} equivalent: {model} damping, "
-                                                f"{rpm:g} rpm", panels)
-                self.figures.append(name)
 
     # -- efficiency ---------------------------------------------------------------------------
     def run_efficiency(self, repeats: int = 3) -> None:
@@ -666,16 +322,8 @@ class Compare:
 
     # -- files --------------------------------------------------------------------------------
     def _write_csv(self, name: str, rows: list[dict]) -> None:
-        if not (self.root and self.out_dir and rows):
-            return
-        keys = list(rows[0])
-        for r in rows:
-            keys += [k for k in r if k not in keys]
-        with open(self.path(name), "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=keys)
-            w.writeheader()
-            for r in rows:
-                w.writerow({k: _cell(r.get(k)) for k in keys})
+        if self.root and self.out_dir and rows:
+            write_csv(self.path(name), rows)
 
     def result(self) -> dict:
         figures = paper_rows(self.steady, self.damping, self.summaries, self.efficiency)
@@ -700,11 +348,7 @@ class Compare:
         result["load_average_end"] = os.getloadavg()[0]
         report = render(self.base, result)
         if self.root and self.out_dir:
-            with open(self.path("results.json"), "w") as fh:
-                json.dump(jsonable(result), fh, indent=1)
-            self._write_csv("paper.csv", [{**f, "how": HOW[f["kind"]]} for f in result["paper"]])
-            with open(self.path("report.md"), "w") as fh:
-                fh.write(report)
+            write_results(self.out_dir, result, report)
         result["report"] = report
         return result
 
@@ -733,37 +377,6 @@ def _cpu(fn, *args, **kw) -> float:
     t0 = time.process_time()
     fn(*args, **kw)
     return time.process_time() - t0
-
-
-def _bounded(result: CaseResult, t_end: float) -> np.ndarray:
-    d = result.bounded()
-    return d[d[:, 0] <= t_end + 0.5 * result.case.dt]
-
-
-def _cell(x):
-    if isinstance(x, float):
-        return f"{x:.10g}" if math.isfinite(x) else ""
-    if isinstance(x, (list, tuple)):
-        return " ".join(_cell(v) for v in x)
-    return "" if x is None else x
-
-
-def _flat(study: str, s: dict) -> dict:
-    c = s["case"]
-    row = {"study": study, **{k: c[k] for k in ("method", "rpm", "c", "model", "integrator",
-                                                "dt", "t_end", "mass")}}
-    for k in ("final_mm", "hann_mean_mm", "steady_mm", "peak_mm"):
-        v = s.get(k)
-        for comp, x in zip(COMPONENTS, v or (None, None, None)):
-            row[f"{k[:-3]}_{comp}_mm"] = x
-    d = s["diverged"]
-    row.update(diverged_s=d["time_s"] if d else None, cause=d["cause"] if d else None,
-               measured_growth=s["measured_growth"], eigen_growth=s["eigen_growth"],
-               vs_half=s.get("vs_half"), sigma_root_max_MPa=s.get("sigma_root_max_MPa"),
-               sigma_root_min_MPa=s.get("sigma_root_min_MPa"),
-               torque_mean_Nm=s.get("torque_mean_Nm"), torque_peak_Nm=s.get("torque_peak_Nm"),
-               steps=s["steps"], wall_s=s["wall_s"], us_per_step=s["us_per_step"])
-    return row
 
 
 def run_compare(scene: Scene, methods, out_dir: str | None, comm, progress=None, *,

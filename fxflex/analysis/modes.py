@@ -113,22 +113,19 @@ def modes_of(form, pairs: int) -> Modes:
 
 
 def speed_builder(method: str, scene: Scene, comm, options=None):
-    """``build_at(rpm)``: the formulation of ``scene`` at another speed. FFRF and GCMS share the
-    first build's mesh, operators and clamped modes (they do not depend on the speed); the others
-    are built afresh (beams: milliseconds; TLF: the mesh comes from the cache)."""
+    """``build_at(rpm)``: the formulation of ``scene`` at another speed, the first build's
+    ``at(rpm=...)`` (FFRF and GCMS share its mesh, operators, modes and projections, which do
+    not depend on the speed; the others are built afresh: beams in milliseconds, TLF's mesh
+    from the cache)."""
     from fxflex.formulation import build
 
     first = []
 
     def build_at(rpm: float):
-        sc = scene.replace(**{"rotation.rpm": float(rpm)})
-        if first and method in ("ffrf", "gcms"):
-            f0 = first[0]
-            return type(f0)(sc, comm, options, model=f0.model, data=f0.data, modes=f0.modes)
-        form = build(method, sc, comm, options)
-        if not first:
-            first.append(form)
-        return form
+        if first:
+            return first[0].at(rpm=rpm)
+        first.append(build(method, scene.replace(**{"rotation.rpm": float(rpm)}), comm, options))
+        return first[0]
 
     return build_at
 

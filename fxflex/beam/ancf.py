@@ -55,6 +55,8 @@ class ANCF(FormulationBase):
 
     method = "ancf"
     extra_columns: tuple[str, ...] = ()
+    #: absolute nodal coordinates: they turn with the beam at the steady state
+    steady_at_rest = False
     #: geometrically exact (absolute coordinates, Green-Lagrange strain): a run stops only beyond
     #: 2 L of deflection (fxflex.time.driver.divergence_limit)
     deflection_range = 2.0

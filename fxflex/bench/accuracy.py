@@ -105,14 +105,15 @@ def settling(amplitude: float, steady: float, decay: float, fraction: float = SE
 
 def _ab2_rate(form, dt: float, sigma: float) -> float | None:
     """Largest ln|z| / dt of AB2's principal root over the roots lambda of the linearised rotating
-    system: Re lambda plus AB2's numerical growth. Dense models: every root; TLF: its highest
-    frequency w_max with Re lambda = -sigma (the law of NOTES.md is this root's small-h limit)."""
+    system: Re lambda plus AB2's numerical growth. Dense models (``all_roots``): every root; TLF:
+    its highest frequency w_max with Re lambda = -sigma (the law of NOTES.md is this root's
+    small-h limit)."""
     from fxflex.numerics.growth import ab2_root
 
-    if form.method == "tlf":
-        lam = np.array([complex(-sigma, form.omega_max())])
-    else:
+    if form.all_roots:
         lam = np.asarray(form.eigenvalues())
+    else:                           # the lowest roots only: the highest frequency stands in
+        lam = np.array([complex(-sigma, form.omega_max())])
     return float(np.max(np.log(ab2_root(dt * lam)) / dt))
 
 

@@ -2,13 +2,16 @@
 
 Studies over speed, damping or the reduction (the benchmarks, ``fxflex compare``) vary nothing
 that the mesh, K_L, M or the clamped modes depend on, so those are computed once here and every
-build only projects (:mod:`fxflex.solid.reduced`).
+build only projects (:mod:`fxflex.solid.reduced`); builds that differ from an earlier one of the
+same method and reduction only in speed or damping do not even project: they are that build's
+``at`` (the projections do not depend on the speed or the damping).
 """
 
 from __future__ import annotations
 
 import time
 
+from fxflex.formulation import rescene
 from fxflex.scene import Scene, load_scene
 from fxflex.solid.cms import ClampedModes, clamped_modes
 from fxflex.solid.ffrf import FFRF
@@ -35,6 +38,9 @@ class ReducedFamily:
         t1 = time.perf_counter()
         self.modes: ClampedModes = clamped_modes(self.model, count, K=self.data.K, M=self.data.M)
         self.timings = {"mesh_assemble": t1 - t0, "eigenmodes": time.perf_counter() - t1}
+        #: the first build per (method, reduction): later speeds and dampings share its
+        #: projections through ``at``
+        self._first: dict = {}
 
     def scene(self, *overrides: str) -> Scene:
         for text in overrides:
@@ -52,5 +58,12 @@ class ReducedFamily:
             if sec not in SHARED_SECTIONS and getattr(scene, sec) != getattr(self.base, sec):
                 raise ValueError(f"scene differs from the family's in [{sec}]; a family only "
                                  f"varies {', '.join(SHARED_SECTIONS)}")
+        first = self._first.get((method, scene.reduction))
+        if first is not None:
+            rot, damp = scene.rotation, scene.damping
+            if rescene(first.scene, rpm=rot.rpm, damping=damp.c, model=damp.model) == scene:
+                return first.at(rpm=rot.rpm, damping=damp.c, model=damp.model)
         cls = {"ffrf": FFRF, "gcms": GCMS}[method]
-        return cls(scene, self.comm, model=self.model, data=self.data, modes=self.modes)
+        form = cls(scene, self.comm, model=self.model, data=self.data, modes=self.modes)
+        self._first.setdefault((method, scene.reduction), form)
+        return form

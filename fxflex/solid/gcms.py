@@ -179,6 +179,8 @@ class GCMS(ReducedFormulation):
     """
 
     method = "gcms"
+    #: absolute coordinates: at the steady state xi = R(phi) zeta moves, xi' = Omega J xi
+    steady_at_rest = False
 
     def __init__(self, scene: Scene, comm, options: BuildOptions | None = None, *,
                  modes: ClampedModes | None = None, model: SolidModel | None = None,

@@ -216,6 +216,13 @@ class ReducedFormulation(FormulationBase):
 
     method = ""
     extra_columns = ("drive_torque_Nm",)
+    #: the projections this build used (FFRFInvariants or GlobalModes): what :meth:`at` shares
+    _projected = None
+    #: projections handed to a build by :meth:`at`, used instead of the cache or the mesh
+    _shared = None
+    #: the build :meth:`at` derived this one from: its mesh, operators, clamped modes and
+    #: root-stress map are this one's too, built (once, there) when either first asks
+    _source = None
 
     def __init__(self, scene: Scene, build_comm):
         self.scene = scene
@@ -374,10 +381,19 @@ class ReducedFormulation(FormulationBase):
         stress (Eq. 12-14) in the root cells (:mod:`fxflex.solid.section`), linear in z, so
         projected on the basis once (first call collective on the build communicator)."""
         if self._root_map is None:
-            basis, _ = self.nodal_basis()
-            self._root_map = self.model.root_section("hooke").resultant_matrix(basis)
+            self._root_map = self._root_resultants()
         return self.model.shape.axial_stress(
             0.0, self._root_map @ self.rotating_coordinates(t, q))
+
+    def _root_resultants(self) -> np.ndarray:
+        """The root-section resultants per unit z (independent of the speed and the damping:
+        the source build's, when there is one)."""
+        if self._source is not None:
+            return self._source._root_resultants()
+        if self._root_map is None:
+            basis, _ = self.nodal_basis()
+            self._root_map = self.model.root_section("hooke").resultant_matrix(basis)
+        return self._root_map
 
     # -- mesh, operators and modes: built when first asked for ------------------------------------
     def _use(self, count: int, model: SolidModel | None, data: MeshData | None, modes) -> bool:
@@ -393,6 +409,8 @@ class ReducedFormulation(FormulationBase):
     def model(self) -> SolidModel:
         from fxflex.solid.model import SolidModel
 
+        if self._model is None and self._source is not None:
+            self._model = self._source.model
         if self._model is None:
             self._model = SolidModel(self.scene, self.build_comm)
             self.timings["mesh"] = self._model.timings.get("mesh", 0.0)
@@ -400,6 +418,8 @@ class ReducedFormulation(FormulationBase):
 
     @property
     def data(self) -> MeshData:
+        if self._data is None and self._source is not None:
+            self._data = self._source.data
         if self._data is None:
             self._data = mesh_data(self.model)
             self.timings["assemble"] = self._data.timings["assemble"]
@@ -410,6 +430,8 @@ class ReducedFormulation(FormulationBase):
         """The clamped modes (at least the first ``count``)."""
         from fxflex.solid.cms import clamped_modes
 
+        if self._modes is None and self._source is not None:
+            self._modes = self._source.modes
         if self._modes is None:
             t0 = time.perf_counter()
             d = self._data
@@ -419,11 +441,16 @@ class ReducedFormulation(FormulationBase):
         return self._modes
 
     def _projections(self, key: str | None, cls, project):
-        """``cls`` from the cache under ``key``, else ``project(model, data, Phi)`` (stored)."""
+        """The projections shared by :meth:`at`, else ``cls`` from the cache under ``key``, else
+        ``project(model, data, Phi)`` (stored); kept as ``_projected`` for :meth:`at`."""
+        if self._shared is not None:
+            self._projected = self._shared
+            return self._shared
         t0 = time.perf_counter()
         out = load_reduced(key, cls, self.build_comm) if key else None
         if out is not None:
             self.timings["cache_load"] = time.perf_counter() - t0
+            self._projected = out
             return out
         data = self.data                       # assembled first: the eigensolve reuses K, M
         Phi = self.modes.vectors[:, : self._count]
@@ -432,7 +459,29 @@ class ReducedFormulation(FormulationBase):
         self.timings["invariants"] = time.perf_counter() - t1
         if key:
             save_reduced(key, out, self.build_comm)
+        self._projected = out
         return out
+
+    def at(self, *, rpm: float | None = None, damping: float | None = None,
+           model: str | None = None) -> "ReducedFormulation":
+        """The same method and options at another speed (rpm), damping coefficient c or damping
+        model, sharing this build's projections -- the invariants on the modal basis, which
+        depend on the mesh, material, load and mode count but never on the speed or the damping
+        (module docstring) -- and its mesh, operators, clamped modes and root-stress map, now or
+        when first asked for: only the few dense operators of the new speed and damping are
+        formed (milliseconds). The numbers are those of a fresh ``build`` of that scene, whose
+        projections come from the cache (``tests/test_at.py``)."""
+        from fxflex.formulation import rescene
+
+        scene = rescene(self.scene, rpm=rpm, damping=damping, model=model)
+        cls = type(self)
+        form = cls.__new__(cls)
+        form._shared = self._projected          # read by _projections in the constructor
+        form._source = self if self._source is None else self._source
+        cls.__init__(form, scene, self.build_comm, self.options, model=self._model,
+                     data=self._data, modes=self._modes)
+        form.options = self.options
+        return form
 
     def _drive_state(self, t: float) -> tuple[float, float, float]:
         return self.drive.state(t)
