@@ -94,6 +94,8 @@ class Dynamics(Protocol):
     #: equilibrium's state at phi = 0. False where they turn with the body there (absolute
     #: coordinates: GCMS's xi' = Omega J xi, TLF's and ANCF's nodal ones)
     steady_at_rest: bool
+    #: the scene key that sets the mesh ("mesh.solid": hexahedra; "mesh.beam_elements")
+    mesh_key: str
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
         """(q0, v0): undeformed body in rigid rotation at phi(0), phi'(0) (NOTES.md)."""
@@ -271,6 +273,7 @@ class FormulationBase:
     distributed: bool = False
     steady_at_rest: bool = True
     all_roots: bool = True
+    mesh_key: str = "mesh.beam_elements"
     stability_note: str | None = None
     force_eval: str | None = None
     mass_kind: str | None = None

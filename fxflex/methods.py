@@ -8,12 +8,21 @@ import importlib
 
 from fxflex.scene import Scene
 
-__all__ = ["MODULES", "dof_count"]
+__all__ = ["MODULES", "CLASSES", "dof_count", "formulation_class"]
 
 #: where each method's ``build(scene, comm, options)`` lives; imported lazily so that beam runs
 #: never import dolfinx
 MODULES = {"ffrf": "fxflex.solid.ffrf", "gcms": "fxflex.solid.gcms", "tlf": "fxflex.solid.tlf",
            "lebb": "fxflex.beam.lebb", "nebb": "fxflex.beam.nebb", "ancf": "fxflex.beam.ancf"}
+#: the formulation class in each module: its declared traits (``distributed``, ``mesh_key``, ...)
+#: answer what studies must know before building
+CLASSES = {"ffrf": "FFRF", "gcms": "GCMS", "tlf": "TLF", "lebb": "LEBB", "nebb": "NEBB",
+           "ancf": "ANCF"}
+
+
+def formulation_class(method: str) -> type:
+    """The class of ``method``'s formulation, imported (the solids import dolfinx), not built."""
+    return getattr(importlib.import_module(MODULES[method]), CLASSES[method])
 
 
 def dof_count(method: str, scene: Scene) -> int | None:

@@ -14,7 +14,7 @@ from fxflex.scene import PAPER_DAMPING, PAPER_RPM, Scene
 
 __all__ = ["SteadyRow", "steady_time", "plan", "PAPER_WINDOW", "TLF_WINDOWS", "SAMPLE_DT",
            "DAMPING_METHODS", "DAMPING_RPM", "DAMPING_STEP", "GROWTH_LIMIT", "STEP_FACTORS",
-           "LINEAR", "C3"]
+           "LINEAR", "C3", "SHORT_WINDOWS", "MASS_CASES"]
 
 #: the window used for the paper's figures where the paper's text gives none (s)
 PAPER_WINDOW = 0.02
@@ -26,6 +26,10 @@ SAMPLE_DT = 5e-6
 DAMPING_METHODS = ("gcms", "tlf", "ancf")
 DAMPING_RPM = (PAPER_RPM[0], PAPER_RPM[2])
 DAMPING_STEP = {"gcms": 0.1e-6}
+#: methods whose transients run on shorter windows unless ``--full`` (their cost per step)
+SHORT_WINDOWS = {"tlf": TLF_WINDOWS}
+#: extra cases of the step study: (--mass, step factor) of the methods with a mass option
+MASS_CASES = {"tlf": (("consistent", 1.2),)}
 #: how far a run about an unstable equilibrium may grow (m): far enough for a clean growth rate
 GROWTH_LIMIT = 100.0
 #: the step study's multiples of the paper step (Fig. 5: half, selected, slightly larger)
@@ -71,10 +75,10 @@ def plan(methods, full: bool, paper_window: float = PAPER_WINDOW,
          tlf_windows: dict | None = None) -> dict[str, list[Case]]:
     """The transients of studies 3-5 (module docstring) for ``methods``; the windows can be
     shortened (tests)."""
-    tlf_windows = tlf_windows or TLF_WINDOWS
+    short = dict(SHORT_WINDOWS, **({"tlf": tlf_windows} if tlf_windows else {}))
 
     def window(method, study):
-        return paper_window if full or method != "tlf" else tlf_windows[study]
+        return paper_window if full or method not in short else short[method][study]
 
     out = {"speeds": [], "steps": [], "damping": []}
     for m in methods:
@@ -84,9 +88,9 @@ def plan(methods, full: bool, paper_window: float = PAPER_WINDOW,
         for f in STEP_FACTORS:
             out["steps"].append(Case(m, PAPER_RPM[0], C3, "relative", integ, f * dt,
                                      window(m, "steps")))
-        if m == "tlf":
-            out["steps"].append(Case(m, PAPER_RPM[0], C3, "relative", integ, 1.2 * dt,
-                                     window(m, "steps"), mass="consistent"))
+        for mass, factor in MASS_CASES.get(m, ()):
+            out["steps"].append(Case(m, PAPER_RPM[0], C3, "relative", integ, factor * dt,
+                                     window(m, "steps"), mass=mass))
         if m in DAMPING_METHODS:
             step = DAMPING_STEP.get(m, dt)
             for model in ("relative", "absolute"):

@@ -54,6 +54,7 @@ from fxflex.bench.implicit import compare
 from fxflex.bench.implicit import reference as fine_reference
 from fxflex.formulation import METHODS, PAPER_INTEGRATION, build
 from fxflex.io.report import jsonable
+from fxflex.methods import formulation_class
 from fxflex.scene import PAPER_RPM, Scene
 
 __all__ = ["run", "pareto", "settling", "OWN_THEORY"]
@@ -74,6 +75,8 @@ COARSE = (10, 2, 2)            # quick: the solid methods' mesh
 ROUTES = {"tlf": {"Q1": (2, 4, 8, 12), "Q2": (1, 2, 3, 4)}, "reduced": (2, 4, 8, 12),
           "modes": (10, 60), "beam": (2, 5, 20, 40)}
 QUICK_ROUTES = {"tlf": {"Q1": (2,), "Q2": (1,)}, "reduced": (), "modes": (), "beam": (5,)}
+#: the modal truncation is studied on FFRF (GCMS's count is what its Gram cut keeps)
+MODAL_STUDY = {"ffrf": "reduction.ffrf_modes"}
 
 
 def _log(comm, text: str) -> None:
@@ -165,27 +168,23 @@ def steady_routes(scene: Scene, comm, ref: dict, quick: bool, log) -> list[dict]
     rpm = scene.rotation.rpm
     rows = []
     for method in METHODS:
-        variants: list[tuple[str, Scene]] = []
-        if method in ("ffrf", "gcms"):
+        traits = formulation_class(method)
+        if traits.mesh_key == "mesh.solid":     # the distributed TLF on its own (cheaper) levels
+            levels = routes["tlf"]["Q1"] if traits.distributed else routes["reduced"]
             variants = [(f"steady Q1 {list(refmod.divisions(m))}",
-                         scene.replace(**{"mesh.solid": refmod.divisions(m)}))
-                        for m in routes["reduced"]]
-            if method == "ffrf":
-                variants += [(f"steady, {n} modes", scene.replace(**{"reduction.ffrf_modes": n}))
-                             for n in routes["modes"]]
-        elif method == "tlf":
-            variants = [(f"steady Q1 {list(refmod.divisions(m))}",
-                         scene.replace(**{"mesh.solid": refmod.divisions(m)}))
-                        for m in routes["tlf"]["Q1"]]
+                         scene.replace(**{"mesh.solid": refmod.divisions(m)})) for m in levels]
         else:
-            variants = [(f"steady, {n} elements", scene.replace(**{"mesh.beam_elements": n}))
+            variants = [(f"steady, {n} elements", scene.replace(**{traits.mesh_key: n}))
                         for n in routes["beam"]]
+        if method in MODAL_STUDY:
+            variants += [(f"steady, {n} modes", scene.replace(**{MODAL_STUDY[method]: n}))
+                         for n in routes["modes"]]
         for label, sc in variants:
             form, st, b, s = _timed_build_steady(method, sc, comm)
             rows.append(_route(method, label, form.dof, b, s, st.tip, ref, rpm))
             log(f"  {method} {label}: error {100 * rows[-1]['error_own']:.3f} % (own theory), "
                 f"{b + s:.2f} s")
-        if method == "tlf":                     # higher order: the reference module's Q2
+        if traits.distributed:                  # TLF at higher order: the reference module's Q2
             for m in routes["tlf"]["Q2"]:
                 t0 = time.perf_counter()
                 with cache.bypass():

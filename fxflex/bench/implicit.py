@@ -32,6 +32,7 @@ from scipy.interpolate import CubicSpline
 
 from fxflex.bench.common import machine, markdown_table
 from fxflex.formulation import METHODS, PAPER_INTEGRATION, BuildOptions, build, implicit_step
+from fxflex.methods import formulation_class
 from fxflex.scene import Scene, load_scene
 from fxflex.time import simulate
 
@@ -140,12 +141,13 @@ def _speeds(scene: Scene, comm, log, quick: bool) -> list[dict]:
     rows = []
     methods = ("lebb",) if quick else ("lebb", "nebb", "ancf", "tlf")
     for method in methods:
+        coarse = formulation_class(method).distributed      # TLF on [10,2,2]
         for rpm in (0.0, 1000.0, 5000.0) if quick else SPEEDS:
-            over = [f"rotation.rpm={rpm}"] + ([COARSE] if method == "tlf" else [])
+            over = [f"rotation.rpm={rpm}"] + ([COARSE] if coarse else [])
             form = build(method, load_scene(overrides=over, base=scene), comm,
                          BuildOptions(need_steady=False))
             dt = implicit_step(method, rpm)
-            row = {"method": method + (" [10,2,2]" if method == "tlf" else ""), "rpm": rpm,
+            row = {"method": method + (" [10,2,2]" if coarse else ""), "rpm": rpm,
                    "dt_s": dt}
             try:
                 ref = reference(form)
@@ -251,12 +253,13 @@ def run(scene: Scene, out_dir: str, comm, quick: bool = False) -> dict:
     rhos = (0.9,) if quick else RHOS
     studies = []
     for method in METHODS:
+        traits = formulation_class(method)
         cases = [(method, scene)]
-        if method == "tlf":
+        if traits.distributed:                  # first on the coarse mesh, the default if not quick
             coarse = load_scene(overrides=[COARSE], base=scene)
-            cases = [("tlf [10,2,2]", coarse)] + ([] if quick else [("tlf", scene)])
+            cases = [(f"{method} [10,2,2]", coarse)] + ([] if quick else [(method, scene)])
         for label, sc in cases:
-            if method in ("ffrf", "gcms") and quick:
+            if traits.mesh_key == "mesh.solid" and not traits.distributed and quick:
                 sc = load_scene(overrides=[COARSE], base=sc)
                 label += " [10,2,2]"
             t0 = time.perf_counter()

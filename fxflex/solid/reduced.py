@@ -215,6 +215,7 @@ class ReducedFormulation(FormulationBase):
     """
 
     method = ""
+    mesh_key = "mesh.solid"
     extra_columns = ("drive_torque_Nm",)
     #: the projections this build used (FFRFInvariants or GlobalModes): what :meth:`at` shares
     _projected = None

@@ -88,6 +88,7 @@ class TLF(FormulationBase):
     #: a distributed mesh field whose nodal displacements turn with the hub; the SLEPc PEP gives
     #: the lowest roots only
     distributed, steady_at_rest, all_roots = True, False, False
+    mesh_key = "mesh.solid"
     #: geometrically exact (Green-Lagrange strain): a run stops only beyond 2 L of deflection
     #: (fxflex.time.driver.divergence_limit)
     deflection_range = 2.0
