@@ -18,11 +18,14 @@ COARSE = "mesh.solid=[10, 2, 2]"
 
 @pytest.fixture(scope="module")
 def base(tmp_path_factory):
-    import os
-
-    os.environ["FXFLEX_CACHE"] = str(tmp_path_factory.mktemp("cache"))
-    os.environ.pop("FXFLEX_NO_CACHE", None)
-    return load_scene(overrides=[COARSE])
+    """The coarse scene, with one cache folder for the module, the same on every rank (rank 0's:
+    the fresh builds read the projections the first build wrote, as a user's second run does;
+    a folder per rank would make them recompute the clamped modes, equal only to round-off)."""
+    folder = COMM.bcast(str(tmp_path_factory.mktemp("cache")) if COMM.rank == 0 else None)
+    with pytest.MonkeyPatch.context() as env:
+        env.setenv("FXFLEX_CACHE", folder)
+        env.delenv("FXFLEX_NO_CACHE", raising=False)
+        yield load_scene(overrides=[COARSE])
 
 
 @pytest.mark.parametrize("method", METHODS)
