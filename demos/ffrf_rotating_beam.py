@@ -14,7 +14,7 @@ from mpi4py import MPI
 
 from fxflex.scene import load_scene
 from fxflex.solid.ffrf import FFRF
-from fxflex.solid.linear import linear_steady
+from fxflex.solid.small_strain import linear_steady
 from fxflex.time import simulate
 
 scene = load_scene(overrides=["mesh.solid=[20,4,2]"])

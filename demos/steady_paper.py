@@ -10,7 +10,7 @@
 from mpi4py import MPI
 
 from fxflex.scene import load_scene
-from fxflex.solid.linear import linear_steady
+from fxflex.solid.small_strain import linear_steady
 from fxflex.solid.model import SolidModel
 from fxflex.solid.tlf import tlf_steady
 

@@ -156,7 +156,7 @@ def run(form: Formulation, t_end: float = 0.01, *, integrator: str | None = None
     from fxflex.time import simulate
     from fxflex.time.diagnosis import ab2_warning
     from fxflex.time.driver import step_to_end
-    from fxflex.time.implicit import DEFAULT_RHO_INF
+    from fxflex.time.generalized_alpha import DEFAULT_RHO_INF
 
     if not t_end > 0:
         raise FxflexError(f"t_end: must be > 0, got {t_end!r}")

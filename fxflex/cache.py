@@ -53,7 +53,7 @@ KINDS = {"meshes": "gmsh .msh files of the solid beam (fxflex.mesh.solid)",
          "modes": "clamped eigenmodes for FFRF/GCMS (fxflex.solid.cms)",
          "reduced": "FFRF inertia invariants and GCMS global-mode matrices (fxflex.solid)",
          "tlf-invariants": "TLF system invariant matrices, one file per rank "
-                           "(fxflex.solid.invariant)"}
+                           "(fxflex.solid.tlf_invariants)"}
 
 
 def cache_root() -> Path:

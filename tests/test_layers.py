@@ -139,3 +139,10 @@ def _probes(path: pathlib.Path) -> list[str]:
 def test_no_caller_probes_a_formulation():
     """The contract (fxflex.formulation) declares every member: callers never discover one."""
     assert not [hit for path in MODULES.values() for hit in _probes(path)]
+
+
+def test_no_module_name_repeats():
+    """A newcomer finds a module by its name: one file per name across the package (packages'
+    __init__ aside); ``fxflex bench NAME`` maps to bench/NAME.py or cli.BENCH_MODULES."""
+    names = [path.stem for path in MODULES.values() if path.stem != "__init__"]
+    assert sorted({n for n in names if names.count(n) > 1}) == []

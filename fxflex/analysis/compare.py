@@ -56,7 +56,7 @@ from fxflex.analysis.compare_plan import (C3, DAMPING_RPM, GROWTH_LIMIT, PAPER_W
                                           SAMPLE_DT, TLF_WINDOWS, SteadyRow, plan, steady_time)
 from fxflex.analysis.transient import Case, CaseResult, run_case, summarise
 from fxflex.formulation import PAPER_INTEGRATION, BuildOptions, build
-from fxflex.io.report import envelope
+from fxflex.io.payload import envelope
 from fxflex.scene import METHODS, PAPER_DAMPING, PAPER_RPM, Scene
 
 __all__ = ["SteadyRow", "paper_rows", "run_compare", "plan", "steady_time", "PAPER_WINDOW",
@@ -341,7 +341,7 @@ class Compare:
 
     def write(self, final: bool = False) -> dict:
         """results.json, paper.csv and report.md as they stand (rank 0)."""
-        from fxflex.analysis.report import render
+        from fxflex.analysis.compare_report import render
 
         result = self.result()
         result["finished"] = final

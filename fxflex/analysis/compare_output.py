@@ -8,8 +8,8 @@ import json
 import math
 import os
 
-from fxflex.analysis.report import HOW
-from fxflex.io.report import COMPONENTS, jsonable
+from fxflex.analysis.compare_report import HOW
+from fxflex.io.payload import COMPONENTS, jsonable
 
 __all__ = ["write_csv", "write_results", "cell", "transient_row"]
 

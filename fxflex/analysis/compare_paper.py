@@ -1,5 +1,5 @@
 """The SPEC section 7 rows of ``fxflex compare``: each figure of the paper's Sect. 4 next to ours,
-with the way it is compared (``fxflex.analysis.report.HOW``) and pass/FAIL."""
+with the way it is compared (``fxflex.analysis.compare_report.HOW``) and pass/FAIL."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 
 from fxflex.analysis.compare_plan import C3, DAMPING_RPM, LINEAR
 from fxflex.formulation import PAPER_INTEGRATION
-from fxflex.io.report import COMPONENTS
+from fxflex.io.payload import COMPONENTS
 from fxflex.scene import METHODS, PAPER_RPM
 
 __all__ = ["paper_rows"]

@@ -274,7 +274,7 @@ def modes_table(modes: Modes) -> list[str]:
 def _write_campbell(data: CampbellData, out_dir: str, payload: dict) -> dict[str, str]:
     import json
 
-    from fxflex.io.report import jsonable
+    from fxflex.io.payload import jsonable
 
     stem = os.path.join(out_dir, f"campbell_{data.method}")
     files = {"png": stem + ".png", "csv": stem + ".csv", "json": stem + ".json"}

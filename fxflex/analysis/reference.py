@@ -7,7 +7,7 @@ value for the 3-D continuum is estimated here, for two theories:
   load on the deformed position; paper Eq. 30-33 at constant speed), solved by
   :func:`fxflex.solid.tlf.tlf_steady` -- the truth every method is measured against;
 - ``linear``: the small-strain equilibrium (K_L - Omega^2 M_P) U = F + Omega^2 f_c (Eq. 59 without
-  time derivatives), :func:`fxflex.solid.linear.linear_steady` -- the continuum that FFRF, GCMS and
+  time derivatives), :func:`fxflex.solid.small_strain.linear_steady` -- the continuum that FFRF, GCMS and
   LEBB approximate, so that their discretisation error is separated from their model error.
 
 Discretisation. Two families of meshes of the same shape, (nx, ny, nz) = (16 m, 2 m, m): cells of
@@ -134,7 +134,7 @@ def equilibrium_levels(scene: Scene, comm, families: dict, speeds, theories=THEO
     """Solve both theories at every speed on every level of ``families``; one row per (family,
     level, theory, speed) with the tip (m), unknowns, Newton iterations and wall times. One mesh
     and function space per level serves every speed and theory."""
-    from fxflex.solid.linear import linear_steady
+    from fxflex.solid.small_strain import linear_steady
     from fxflex.solid.model import SolidModel
     from fxflex.solid.tlf import tlf_steady
 

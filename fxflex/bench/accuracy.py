@@ -53,7 +53,7 @@ from fxflex.bench.common import machine, markdown_table
 from fxflex.bench.implicit import compare
 from fxflex.bench.implicit import reference as fine_reference
 from fxflex.formulation import METHODS, PAPER_INTEGRATION, build
-from fxflex.io.report import jsonable
+from fxflex.io.payload import jsonable
 from fxflex.methods import formulation_class
 from fxflex.scene import PAPER_RPM, Scene
 

@@ -6,7 +6,7 @@
   lumped mass).
 - **Table 4**: TLF-CD with (``invariant``) and without (``ufl``, the per-step integration of
   Eq. 65) system invariant matrices at three mesh sizes, time per step extrapolated to 1e4 steps
-  (:func:`fxflex.bench.tlf.table4`).
+  (:func:`fxflex.bench.tlf_speed.table4`).
 - **Tables 5 and 6**: NEBB-AB and ANCF-CD with system invariant matrices against the element
   route (Eq. 66; element invariant matrices) at 10 and 20 elements, 1e4 steps at dt = 0.02 us
   (:func:`fxflex.bench.beams.tables_5_6`).
@@ -24,7 +24,7 @@ import sys
 from fxflex import cache
 from fxflex.bench.beams import tables_5_6, time_steps
 from fxflex.bench.common import machine, markdown_table
-from fxflex.bench.tlf import table4
+from fxflex.bench.tlf_speed import table4
 from fxflex.formulation import PAPER_AB_STEP
 from fxflex.scene import METHODS, Scene
 

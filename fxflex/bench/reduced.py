@@ -61,7 +61,7 @@ def speed(scene: Scene, comm, steps: int = 10_000, dt: float = 0.02e-6, repeats:
 
 def steady_table(family: ReducedFamily, rpms=(1000.0, 5000.0), counts=(10, 30, 60)) -> list[dict]:
     """FFRF steady state against the full-order linear equilibrium (issue 3)."""
-    from fxflex.solid.linear import linear_steady
+    from fxflex.solid.small_strain import linear_steady
 
     rows = []
     for rpm in rpms:
@@ -192,7 +192,7 @@ def omega_for_blowup(dt: float, window: float, log_growth: float = 20.0) -> floa
 def gram_study(family: ReducedFamily, tols, window: float = 0.01) -> list[dict]:
     """Retained global modes, highest frequency, AB2 step that keeps the fastest mode's growth
     over ``window`` below e (from the principal root), and the steady state, per Gram cut."""
-    from fxflex.solid.linear import linear_steady
+    from fxflex.solid.small_strain import linear_steady
 
     full = linear_steady(family.model).tip
     rows = []
@@ -306,7 +306,7 @@ def run(scene: Scene, out_dir: str, comm, quick: bool = False) -> dict:
     mesh and short windows, a smoke run)."""
     import platform
 
-    from fxflex.io.report import jsonable
+    from fxflex.io.payload import jsonable
 
     if quick:
         scene = scene.replace(**{"mesh.solid": (20, 4, 2)})

@@ -29,7 +29,7 @@ import time
 
 from fxflex.bench.common import machine, markdown_table, run_cli
 from fxflex.formulation import PAPER_INTEGRATION, BuildOptions, build
-from fxflex.io.report import jsonable
+from fxflex.io.payload import jsonable
 from fxflex.scene import METHODS, Scene
 from fxflex.time import simulate
 

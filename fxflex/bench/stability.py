@@ -10,7 +10,7 @@ long-run energies and the highest mode's growth) into the output folder.
    the largest |dq| over the last edge window against the largest over the first (each edge
    window 2 % of the run and at least two periods of the highest mode). Central difference:
    ``CD_WINDOW_STEPS`` steps, unstable when the difference grows by more than ``CD_GROWTH``;
-   estimate 2 / w_max and the damped one-mode root (:mod:`fxflex.time.stability`). AB2, which
+   estimate 2 / w_max and the damped one-mode root (:mod:`fxflex.time.step_stability`). AB2, which
    has no sharp limit: unstable when it grows by more than e over ``AB2_PERIODS`` periods of the
    highest mode (a window in the mode's own time scale, so that every method's trials take a
    few thousand steps; the growth is measured between the edge windows, 98 periods apart);
@@ -47,7 +47,8 @@ from fxflex.bench.common import machine, markdown_table, run_cli
 from fxflex.formulation import (PAPER_AB_STEP, PAPER_INTEGRATION, BuildOptions, build,
                                 implicit_step)
 from fxflex.scene import METHODS, Scene, load_scene
-from fxflex.time import make_scheme, stability
+from fxflex.time import make_scheme
+from fxflex.time import step_stability as stability
 
 __all__ = ["run", "HOSTILE", "COARSE", "top_vector", "growth_over", "critical_step_study",
            "long_run", "hostile_case", "INTEGRATORS"]

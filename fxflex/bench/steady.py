@@ -22,7 +22,7 @@ from fxflex.mesh.solid import build_solid_mesh
 from fxflex.scene import PAPER_RPM, Scene
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel
-from fxflex.solid.petsc import direct_solver
+from fxflex.solid.solvers import direct_solver
 from fxflex.solid.tlf import tlf_steady
 
 __all__ = ["run", "components"]

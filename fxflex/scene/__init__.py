@@ -3,7 +3,7 @@
 from fxflex.scene.kinematics import Drive
 from fxflex.scene.load import (load_scene, parse_override, scene_from_dict, validate,
                                validate_for)
-from fxflex.scene.model import (METHODS, PAPER_DAMPING, PAPER_RPM, Damping, Geometry, Load,
+from fxflex.scene.schema import (METHODS, PAPER_DAMPING, PAPER_RPM, Damping, Geometry, Load,
                                 Material, MeshSpec, Reduction, Rotation, Scene, Section)
 
 __all__ = [

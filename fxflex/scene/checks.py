@@ -1,7 +1,7 @@
 """What a scene may hold: types, finite ranges, choices and the physics limits (SPEC section 8).
 
 This is the one place the scene is validated. The frozen dataclasses of
-:mod:`fxflex.scene.model` call :func:`check_section` and :func:`check_scene` on construction, so
+:mod:`fxflex.scene.schema` call :func:`check_section` and :func:`check_scene` on construction, so
 a scene built from Python (``Material(nu=0.5)``, ``Scene.replace``), from a TOML file or from
 ``--set`` passes the same checks and fails with the same one-line :class:`SceneError` naming the
 dotted key and what is allowed.

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from fxflex.scene.model import Rotation
+from fxflex.scene.schema import Rotation
 
 __all__ = ["Drive", "S3", "P3", "rotation_z", "rotation_cs"]
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from fxflex.errors import SceneError
 from fxflex.scene.checks import MIN_SECTION_RATIO, check_keys, printable, shown
-from fxflex.scene.model import Scene
+from fxflex.scene.schema import Scene
 
 __all__ = ["load_scene", "parse_override", "scene_from_dict", "validate", "validate_for",
            "MAX_TWIST_PER_ELEMENT_DEG", "MIN_SECTION_RATIO"]

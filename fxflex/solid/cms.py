@@ -41,7 +41,7 @@ __all__ = ["ClampedModes", "clamped_modes", "mass_and_stiffness", "modes_key", "
 
 #: modules whose source decides the modes (with the mesh key): a change makes a new cache entry
 CODE_MODULES = ("fxflex.solid.cms", "fxflex.solid.forms", "fxflex.solid.model",
-                "fxflex.scene.model", "fxflex.scene.kinematics")
+                "fxflex.scene.schema", "fxflex.scene.kinematics")
 
 
 @dataclass(frozen=True)
@@ -113,7 +113,7 @@ def clamped_modes(model: SolidModel, count: int, *, K: PETSc.Mat | None = None,
 def _solve(model: SolidModel, count: int, K, M, tol: float) -> ClampedModes:
     from slepc4py import SLEPc
 
-    from fxflex.solid.petsc import make_direct
+    from fxflex.solid.solvers import make_direct
 
     t0 = time.perf_counter()
     if K is None or M is None:

@@ -2,7 +2,7 @@
 
 Studies over speed, damping or the reduction (the benchmarks, ``fxflex compare``) vary nothing
 that the mesh, K_L, M or the clamped modes depend on, so those are computed once here and every
-build only projects (:mod:`fxflex.solid.reduced`); builds that differ from an earlier one of the
+build only projects (:mod:`fxflex.solid.reduction`); builds that differ from an earlier one of the
 same method and reduction only in speed or damping do not even project: they are that build's
 ``at`` (the projections do not depend on the speed or the damping).
 """
@@ -17,7 +17,7 @@ from fxflex.solid.cms import ClampedModes, clamped_modes
 from fxflex.solid.ffrf import FFRF
 from fxflex.solid.gcms import GCMS
 from fxflex.solid.model import SolidModel
-from fxflex.solid.reduced import MeshData, mesh_data
+from fxflex.solid.reduction import MeshData, mesh_data
 
 __all__ = ["ReducedFamily", "SHARED_SECTIONS"]
 

@@ -12,7 +12,7 @@ gives through Lagrange's equations (Eq. 17: M q'' = Q_e + Q_v - Q_d - Q_k) the e
     eta'' + (2 phi' G + (c/rho) I) eta' + (Lambda + phi'' G - phi'^2 N) eta
         = r(t) Phi^T F - phi'' g + phi'^2 n                                       (NOTES.md)
 
-with the four inertia invariants G, N, g, n (module :mod:`fxflex.solid.reduced`). The
+with the four inertia invariants G, N, g, n (module :mod:`fxflex.solid.reduction`). The
 quadratic velocity vector of Eq. 17 is Q_v = (-2 phi' G eta' + phi'^2 (n + N eta),
 -2 phi' (n + N eta).eta') in (eta, phi) rows. Damping: the relative model F_d = -c U' (Eq. 15-16)
 gives (c/rho) eta'; the absolute one (SPEC section 5) adds the circulatory (c/rho) phi' G eta.
@@ -39,7 +39,7 @@ import numpy as np
 from fxflex.formulation import BuildOptions
 from fxflex.scene import Scene
 from fxflex.scene.kinematics import P3, S3
-from fxflex.solid.reduced import (MeshData, ReducedFormulation, RotatingSystem, inner, mat_apply,
+from fxflex.solid.reduction import (MeshData, ReducedFormulation, RotatingSystem, inner, mat_apply,
                                   nodal, reduced_key, tip_rows)
 
 if TYPE_CHECKING:                   # a cache hit needs neither dolfinx nor SLEPc: imported on use

@@ -32,7 +32,7 @@ With u_f = Psi~ xi the mass is constant (Eq. 20: I), there is no quadratic veloc
 
 Rotating frame. Substituting xi = R(phi) zeta with R(phi) = Psi~^T M A_d Psi~ (orthogonal, R' =
 phi' J R) turns Eq. 24 at constant speed into the rotating-frame system of
-:mod:`fxflex.solid.reduced` with K_r = K(0), G_r = J, N_r = -J^2, n_r = w_P; its equilibrium zeta
+:mod:`fxflex.solid.reduction` with K_r = K(0), G_r = J, N_r = -J^2, n_r = w_P; its equilibrium zeta
 is the steady state (SPEC section 6), its eigenvalues the stability, and the deflection is
 U = A^T u_f (SPEC section 2).
 
@@ -53,7 +53,7 @@ from fxflex.numerics.dense import DenseLU
 from fxflex.formulation import BuildOptions
 from fxflex.scene import Scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
-from fxflex.solid.reduced import (AffineStack, MeshData, ReducedFormulation, RotatingSystem,
+from fxflex.solid.reduction import (AffineStack, MeshData, ReducedFormulation, RotatingSystem,
                                   inner, mat_apply, nodal, reduced_key, rotation_weights, tip_rows)
 
 if TYPE_CHECKING:                   # a cache hit needs neither dolfinx nor SLEPc: imported on use

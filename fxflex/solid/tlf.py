@@ -7,7 +7,7 @@ Transient (Eq. 35), inertial frame, nodal displacements u = x - x0 (Eq. 25) as u
 - Q_k, the St.Venant-Kirchhoff internal force (Eq. 30-33), two ways on the same Gauss rule:
   ``ufl`` assembles the residual form every evaluation (the per-step integration of Eq. 65) and
   ``invariant`` applies the system invariant matrices K_L, K_N1, K_N2, K_N3 (Eq. 33, 35; see
-  :mod:`fxflex.solid.invariant`). Both are evaluated on the displacement seen from the hub,
+  :mod:`fxflex.solid.tlf_invariants`). Both are evaluated on the displacement seen from the hub,
   U = A^T (x0 + u) - x0, and turned back, Q_k(u) = A Q_k(U): an identity (the Green-Lagrange strain
   does not change under the rigid rotation A, Eq. 30) that keeps the strain, which is small, from
   being computed as the difference of O(1) rotation terms. Measured at a 0.8 rad hub angle on the

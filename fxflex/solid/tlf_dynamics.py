@@ -15,7 +15,7 @@ from scipy.linalg.blas import daxpy
 
 from fxflex.scene.kinematics import rotation_cs
 from fxflex.solid.model import SolidModel
-from fxflex.solid.petsc import direct_solver
+from fxflex.solid.solvers import direct_solver
 from fxflex.solid.tlf_force import make_force
 
 if TYPE_CHECKING:

@@ -1,6 +1,6 @@
 """TLF internal force Q_k(u) assembled from the SVK residual form (paper Eq. 30-33, the ``ufl``
 route of --force-eval), and the choice between it and the invariant-matrix route
-(:class:`fxflex.solid.invariant.InvariantForce`, Eq. 33, 35)."""
+(:class:`fxflex.solid.tlf_invariants.InvariantForce`, Eq. 33, 35)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 from dolfinx import cpp, fem
 
 from fxflex.solid import forms
-from fxflex.solid.invariant import InvariantForce
+from fxflex.solid.tlf_invariants import InvariantForce
 from fxflex.solid.model import SolidModel
 
 __all__ = ["KERNEL_FLAGS", "UflForce", "make_force"]

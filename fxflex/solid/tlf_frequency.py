@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from fxflex.solid.model import SolidModel
-from fxflex.solid.petsc import make_direct
+from fxflex.solid.solvers import make_direct
 
 __all__ = ["largest_frequency"]
 

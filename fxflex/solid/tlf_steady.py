@@ -24,7 +24,7 @@ from dolfinx import fem
 from fxflex.formulation import SteadyState
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel
-from fxflex.solid.petsc import newton
+from fxflex.solid.solvers import newton
 
 __all__ = ["tlf_steady"]
 

@@ -14,7 +14,7 @@ from petsc4py import PETSc
 
 from fxflex.numerics.hub import HubFrameFactor
 from fxflex.solid import forms
-from fxflex.solid.petsc import direct_solver
+from fxflex.solid.solvers import direct_solver
 
 if TYPE_CHECKING:
     from fxflex.solid.tlf import TLF

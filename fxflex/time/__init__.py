@@ -5,7 +5,7 @@ from fxflex.time.diagnosis import (ab2_growth_exponent, deviation_growth, diagno
                                    measured_growth_rate)
 from fxflex.time.driver import Resume, RunResult, divergence_limit, simulate
 from fxflex.time.explicit import AB2, SCHEMES, CentralDifference
-from fxflex.time.implicit import GeneralizedAlpha, NewtonFailure
+from fxflex.time.generalized_alpha import GeneralizedAlpha, NewtonFailure
 from fxflex.time.schemes import INTEGRATORS, make_scheme
 
 __all__ = ["AB2", "CentralDifference", "GeneralizedAlpha", "NewtonFailure", "SCHEMES",

@@ -6,7 +6,7 @@
    formulation's own ``stable()`` is False; ``growth_rate()`` gives (Re lambda_max, |Im lambda|
    of that root).
 2. *numerical*: the scheme amplifies the highest mode (w_max, damping c/rho; see
-   :func:`fxflex.time.stability.top_mode`) at this step - central difference beyond its limit,
+   :func:`fxflex.time.step_stability.top_mode`) at this step - central difference beyond its limit,
    AB2 by more than exp(``AB2_LOG_GROWTH``) by the time of the stop (its exact root) - or
    generalised-alpha's Newton iteration failed for good (it has no step limit on linear
    systems). When an unstable eigenvalue is there too, the faster growth is named.
@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 from fxflex.numerics.growth import growth_fit
-from fxflex.time import stability
+from fxflex.time import step_stability as stability
 from fxflex.formulation import SMALL_DEFORMATION_RANGE
 
 __all__ = ["diagnose", "ab2_growth_exponent", "measured_growth_rate", "deviation_growth",

@@ -10,7 +10,7 @@ checkpoints, and stops early when the run diverges. Divergence is checked every
 - a deflection beyond the method's range, ``divergence_limit``: a quarter of the length for the
   small-deformation models, twice the length for the geometrically exact ones;
 - an implicit step whose Newton iteration fails for good
-  (:class:`~fxflex.time.implicit.NewtonFailure`): the run ends at the last converged state.
+  (:class:`~fxflex.time.generalized_alpha.NewtonFailure`): the run ends at the last converged state.
 
 A sample is written only once it has passed these checks, so no output ever holds a NaN; the
 result then carries the last finite deflection. The deflection magnitude at the last
@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fxflex.formulation import SMALL_DEFORMATION_RANGE
-from fxflex.time.implicit import NewtonFailure
+from fxflex.time.generalized_alpha import NewtonFailure
 from fxflex.time.schemes import make_scheme
 
 __all__ = ["RunResult", "Resume", "simulate", "divergence_limit", "step_to_end", "GROWTH_POINTS",

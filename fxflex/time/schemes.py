@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from fxflex.time.explicit import SCHEMES
-from fxflex.time.implicit import GeneralizedAlpha
+from fxflex.time.generalized_alpha import GeneralizedAlpha
 
 __all__ = ["INTEGRATORS", "make_scheme"]
 

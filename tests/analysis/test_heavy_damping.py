@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.linalg as la
 
-from fxflex.analysis.linear import companion, conjugate_pairs, quadratic_eigen
+from fxflex.numerics.qep import companion, conjugate_pairs, quadratic_eigen
 from fxflex.cli import main
 
 

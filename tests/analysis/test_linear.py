@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from fxflex.analysis.linear import (companion_eigenvalues, conjugate_pairs, quadratic_eigen,
+from fxflex.numerics.qep import (companion_eigenvalues, conjugate_pairs, quadratic_eigen,
                                     unstable)
 from fxflex.analysis.twodof import (CASES, behaviour, case_systems, eq63_roots, integrate,
                                     measured_growth)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fxflex.analysis.linear import conjugate_pairs, quadratic_eigen
+from fxflex.numerics.qep import conjugate_pairs, quadratic_eigen
 from fxflex.analysis.modes import LABELS, modes_of
 from fxflex.bench.reduced import ReducedFamily
 from fxflex.formulation import BuildOptions, build

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-import fxflex.analysis.petsc as pep
+import fxflex.numerics.petsc as pep
 from fxflex.cli import main
 
 SMALL_TLF = ["--set", "mesh.solid=[10,2,2]"]          # 270 unknowns

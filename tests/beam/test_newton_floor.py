@@ -1,4 +1,4 @@
-"""Newton stops at the round-off floor of its residual (fxflex.beam.linear.newton): fine beam
+"""Newton stops at the round-off floor of its residual (fxflex.numerics.dense.newton): fine beam
 meshes have stiffness entries ~ 1/h^3 against loads that do not grow, so the residual cannot fall
 by 1e-10 of its initial value; before the floor test LEBB and NEBB with 100 elements reported
 30 (resp. 300) iterations and converged: false."""
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fxflex.beam.linear import newton
+from fxflex.numerics.dense import newton
 from fxflex.formulation import build
 from fxflex.scene import load_scene
 

@@ -12,9 +12,9 @@ from fxflex import cache
 from fxflex.formulation import build
 from fxflex.scene import load_scene
 from fxflex.solid.cms import clamped_modes, modes_key
-from fxflex.solid.invariant import InvariantForce, invariant_key
+from fxflex.solid.tlf_invariants import InvariantForce, invariant_key
 from fxflex.solid.model import SolidModel
-from fxflex.solid.reduced import reduced_key
+from fxflex.solid.reduction import reduced_key
 
 SELF, COMM = MPI.COMM_SELF, MPI.COMM_WORLD
 SCENE = load_scene(overrides=["mesh.solid=[8,2,2]", "reduction.ffrf_modes=6",

@@ -19,8 +19,8 @@ from fxflex.analysis.signals import growth_fit, hann_mean
 from fxflex.solid.family import ReducedFamily
 from fxflex.scene import load_scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
-from fxflex.solid.linear import linear_steady
-from fxflex.solid.reduced import inner, mat_apply
+from fxflex.solid.small_strain import linear_steady
+from fxflex.solid.reduction import inner, mat_apply
 from fxflex.time import AB2, deviation_growth, diagnose, simulate
 
 COMM = MPI.COMM_WORLD

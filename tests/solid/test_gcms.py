@@ -11,8 +11,8 @@ from fxflex.scene import load_scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
 from fxflex.solid.ffrf import FFRF
 from fxflex.solid.gcms import G3, GCMS
-from fxflex.solid.linear import linear_steady
-from fxflex.solid.reduced import inner, mat_apply, nodal
+from fxflex.solid.small_strain import linear_steady
+from fxflex.solid.reduction import inner, mat_apply, nodal
 from fxflex.time import simulate
 
 COMM = MPI.COMM_WORLD

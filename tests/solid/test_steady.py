@@ -5,7 +5,7 @@ import pytest
 from mpi4py import MPI
 
 from fxflex.scene import PAPER_RPM, load_scene
-from fxflex.solid.linear import linear_steady
+from fxflex.solid.small_strain import linear_steady
 from fxflex.solid.model import SolidModel
 from fxflex.solid.tlf import tlf_steady
 

@@ -17,7 +17,7 @@ from fxflex.formulation import BuildOptions, build
 from fxflex.scene import load_scene
 from fxflex.scene.kinematics import S3, rotation_z
 from fxflex.solid import forms
-from fxflex.solid.invariant import InvariantForce
+from fxflex.solid.tlf_invariants import InvariantForce
 from fxflex.solid.tlf import TLF, UflForce
 from fxflex.time import diagnose, simulate
 from fxflex.time.explicit import CentralDifference

@@ -12,7 +12,7 @@ from fxflex.formulation import FormulationBase, SteadyState
 from fxflex.numerics.qep import DenseLinearisation
 from fxflex.scene import Scene
 from fxflex.time import GeneralizedAlpha, diagnose, simulate
-from fxflex.time.implicit import parameters
+from fxflex.time.generalized_alpha import parameters
 
 
 class _Factor:

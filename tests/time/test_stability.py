@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fxflex.time.diagnosis import measured_growth_rate
-from fxflex.time.stability import (ab2_law_rate, ab2_law_step, amplification, critical_step,
+from fxflex.time.step_stability import (ab2_law_rate, ab2_law_step, amplification, critical_step,
                                    growth_rate, step_map)
 
 

@@ -14,7 +14,7 @@ from dolfinx import fem
 
 from fxflex.formulation import SteadyState
 from fxflex.solid.model import SolidModel
-from fxflex.solid.petsc import direct_solver
+from fxflex.solid.solvers import direct_solver
 
 __all__ = ["linear_steady"]
 
