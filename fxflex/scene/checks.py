@@ -85,6 +85,8 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "rotation.profile": ("constant", "spin-up"),
     "damping.model": ("relative", "absolute"),
     "mesh.ancf_root": ("free-axial", "full"),
+    "mesh.solid_degree": (1, 2),
+    "mesh.beam_variant": ("paper", "locking-free"),
 }
 
 
@@ -136,7 +138,7 @@ def check_section(section, name: str) -> None:
         object.__setattr__(section, field, value)
         if key in CHOICES and value not in CHOICES[key]:
             raise SceneError(key, f"{shown(value)} is not allowed; allowed: "
-                                  f"{', '.join(CHOICES[key])}")
+                                  f"{', '.join(map(str, CHOICES[key]))}")
         allowed = RANGES.get(key)
         if allowed is not None and not all(
                 v in allowed for v in (value if isinstance(value, tuple) else (value,))):

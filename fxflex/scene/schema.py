@@ -24,6 +24,9 @@ __all__ = [
 
 METHODS = ("ffrf", "gcms", "tlf", "lebb", "nebb", "ancf")
 PAPER_RPM = (1000.0, 5000.0, 10000.0)
+#: keys beyond the paper's scene (SPEC sections 9-10): in the scene hash only when not at their
+#: defaults (Scene.hash)
+LATER_KEYS = ("mesh.solid_degree", "mesh.beam_variant")
 PAPER_DAMPING = (100.0, 500.0, 1000.0)
 
 
@@ -126,6 +129,8 @@ class MeshSpec:
     solid: tuple[int, int, int] = (100, 12, 6)
     beam_elements: int = 10
     ancf_root: str = "free-axial"
+    solid_degree: int = 1           # 1: trilinear hexahedra (the paper's); 2: 27-node (SPEC 9)
+    beam_variant: str = "paper"     # "paper" (Eq. 45-57) or "locking-free" (NEBB, ANCF; SPEC 9)
 
     def __post_init__(self) -> None:
         check_section(self, "mesh")
@@ -161,8 +166,16 @@ class Scene:
 
     @property
     def hash(self) -> str:
-        """Stable 16-hex-digit hash of the resolved scene (keys sorted, floats as repr)."""
-        text = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        """Stable 16-hex-digit hash of the resolved scene (keys sorted, floats as repr). The keys
+        of SPEC sections 9-10 (:data:`LATER_KEYS`) count only when not at their defaults, so a
+        scene of sections 1-8 keeps the hash it had before they existed (checkpoints resume)."""
+        data = self.to_dict()
+        for key in LATER_KEYS:
+            sec, name = key.split(".")
+            defaults = {f.name: f.default for f in dataclasses.fields(getattr(self, sec))}
+            if data[sec][name] == defaults[name]:
+                del data[sec][name]
+        text = json.dumps(data, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def replace(self, **sections) -> "Scene":
