@@ -2,6 +2,7 @@
 
 import logging
 
+import numpy as np
 import pytest
 
 for _name in ("ffcx", "UFL", "ufl", "dolfinx"):
@@ -27,3 +28,36 @@ def folder(tmp_path, monkeypatch):
     monkeypatch.setenv("FXFLEX_CACHE", str(tmp_path))
     monkeypatch.delenv("FXFLEX_NO_CACHE", raising=False)
     return tmp_path
+
+
+EPS = np.finfo(float).eps
+
+
+def _distributed_rtol(form, steady) -> float:
+    """How far two equal solves of ``form``'s steady state may differ, relative to it: 0 where
+    the solve is repeatable (one rank), otherwise the forward-error bound cond(K) eps of the
+    distributed direct solve (MUMPS schedules its work across ranks dynamically, so its sums run
+    in a different order from one run to the next), times 10 for the few Newton steps that
+    carry it. cond(K) of the tangent about ``steady``, from the dense matrix (small meshes only).
+    Collective."""
+    if form.comm.size == 1:
+        return 0.0
+    lin = form.linearise(steady)
+    try:
+        K = lin.K
+        indptr, indices, data = K.getValuesCSR()
+        first, last = K.getOwnershipRange()
+        n = K.getSize()[0]
+        local = np.zeros((last - first, n))
+        for i in range(last - first):
+            local[i, indices[indptr[i]:indptr[i + 1]]] = data[indptr[i]:indptr[i + 1]]
+        dense = np.vstack(form.comm.allgather(local))
+    finally:
+        lin.destroy()
+    return 10.0 * np.linalg.cond(dense) * EPS
+
+
+@pytest.fixture
+def distributed_rtol():
+    """:func:`_distributed_rtol`: the accuracy of a steady state solved on several ranks."""
+    return _distributed_rtol
