@@ -9,7 +9,8 @@ of real builds (docs/robustness.md, "Memory and size", has the measurements and 
   bytes (the model's matrices, their M^-1 products, the Newton tangent, the 2n x 2n companion
   matrix of the stability verdict and its eigen-decomposition), and ``element tables`` per
   unknown;
-- solids (FFRF, GCMS, TLF) on n = 3 nx (ny + 1) (nz + 1) unknowns: ``mesh and matrices`` per
+- solids (FFRF, GCMS, TLF) on n = 3 nx (ny + 1) (nz + 1) unknowns (Q1; 3 2nx (2ny + 1) (2nz + 1)
+  for Q2, whose parts carry ``Q2_FACTOR``): ``mesh and matrices`` per
   unknown (gmsh model, dolfinx mesh and dof maps, sparse K, M or Jacobian, work vectors),
   ``factorisation`` (MUMPS; the fill of a 3-D factor grows as n^(4/3), nested dissection's law
   for meshes refined in all three directions, which the factors of these meshes follow: 9.4 to
@@ -63,6 +64,12 @@ SOLID_BASE = 180e6
 SOLID = {"ffrf": (2.6e3, 130.0), "gcms": (2.6e3, 130.0), "tlf": (2.85e3, 245.0)}
 PER_MODE = 46.0
 INVARIANTS = 12e3
+#: Q2 solids (``mesh.solid_degree = 2``), on their own unknown count: the mesh, sparse matrices
+#: (about 190 nonzeros per row against 81 for Q1, but fewer cells per unknown) and factors take
+#: this factor more than the Q1 law per unknown. Measured peaks of TLF steady, serial: 607 MB at
+#: 35100 unknowns (50 x 6 x 4), 956 MB at 58752 (64 x 8 x 4), 1.15 and 1.07 times the Q1 law;
+#: FFRF 792 MB at 58752 -- raised by 12 % as the Q1 coefficients were
+Q2_FACTOR = 1.3
 #: the solid parts grow by this fraction per rank beyond the first (TLF 128 x 16 x 8 on 2 ranks:
 #: 2 x 558 MB at most against 808 MB on one)
 MPI_OVERHEAD = 0.1
@@ -100,29 +107,32 @@ def estimate(method: str, scene: Scene, ranks: int = 1, options: BuildOptions | 
         per_rank = {"base": base, "dense matrices": dense * n * n,
                     "element tables": per_unknown * n}
         return Estimate(method, {k: ranks * v for k, v in per_rank.items()}, ranks)
-    n = _unknowns(scene.mesh.solid)
+    degree = scene.mesh.solid_degree
+    n = _unknowns(scene.mesh.solid, degree)
     per_unknown, factor = SOLID[method]
-    parts = {"base": ranks * SOLID_BASE, "mesh and matrices": per_unknown * n,
-             "factorisation": factor * n ** (4.0 / 3.0)}
+    scale = 1.0 if degree == 1 else Q2_FACTOR
+    parts = {"base": ranks * SOLID_BASE, "mesh and matrices": scale * per_unknown * n,
+             "factorisation": scale * factor * n ** (4.0 / 3.0)}
     if method == "ffrf":
         parts["modes"] = PER_MODE * n * scene.reduction.ffrf_modes
     elif method == "gcms":
         parts["modes"] = PER_MODE * n * (scene.reduction.gcms_modes // 3)
     else:
-        if getattr(options, "force_eval", None) == "invariant":
-            parts["invariants"] = INVARIANTS * n
+        if getattr(options, "force_eval", None) == "invariant" and degree == 1:
+            parts["invariants"] = INVARIANTS * n     # Q2 refuses the route (tlf_invariants)
         if getattr(options, "mass", None) == "consistent":
-            parts["mass factorisation"] = SOLID["ffrf"][1] * n ** (4.0 / 3.0)
+            parts["mass factorisation"] = scale * SOLID["ffrf"][1] * n ** (4.0 / 3.0)
     # a distributed factor and mesh carry ghosts and halo copies: measured +10 % at 2 ranks
     spread = 1.0 + MPI_OVERHEAD * (ranks - 1)
     return Estimate(method, {k: v if k == "base" else spread * v for k, v in parts.items()}, ranks)
 
 
-def _unknowns(divisions) -> float:
-    """Nodal unknowns of a solid mesh after the root clamp, 3 nx (ny + 1) (nz + 1) (as
-    ``fxflex.solid.model.solid_dof_count``, which imports dolfinx)."""
+def _unknowns(divisions, degree: int = 1) -> float:
+    """Nodal unknowns of a solid mesh of element degree p after the root clamp,
+    3 p nx (p ny + 1) (p nz + 1) (as ``fxflex.solid.model.solid_dof_count``, which imports
+    dolfinx)."""
     nx, ny, nz = (float(v) for v in divisions)
-    return 3.0 * nx * (ny + 1) * (nz + 1)
+    return 3.0 * degree * nx * (degree * ny + 1) * (degree * nz + 1)
 
 
 # -- what the machine has ----------------------------------------------------------------------
@@ -237,7 +247,8 @@ def _largest(method: str, scene: Scene, ranks: int, room: float,
     best = _scaled(method, scene, lo)
     if method in BEAMS:
         return f"up to about {best.mesh.beam_elements} elements on this machine"
-    return (f"meshes up to about {_unknowns(best.mesh.solid):.2g} unknowns on this machine, "
+    return (f"meshes up to about {_unknowns(best.mesh.solid, best.mesh.solid_degree):.2g} "
+            f"unknowns on this machine, "
             f"e.g. mesh.solid = {list(best.mesh.solid)}")
 
 

@@ -6,6 +6,11 @@ owned entries of u in the inertial frame o-xyz and of U in the hub frame O-XYZ (
 - x0 for TLF, the modal sum for FFRF and GCMS). The writer holds the file and the two named
 functions, ``u`` and ``U_hub``, on the formulation's function space. It imports no formulation,
 so :mod:`fxflex.io` stays below :mod:`fxflex.solid`.
+
+Q2 solids (``mesh.solid_degree = 2``): the space is P2 on the 27-node (order-2) geometry, and
+dolfinx 0.5's XDMF writes a Lagrange field whose degree equals the geometry's as it is, on the
+``Hexahedron_27`` topology, so the fields are written at every node (vertices, edge, face and
+cell midpoints) with no interpolation to P1.
 """
 
 from __future__ import annotations

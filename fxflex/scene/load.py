@@ -98,7 +98,7 @@ def validate_for(method: str, scene: Scene) -> None:
 
 
 #: methods that refuse the SPEC section 9 keys until they carry them (issue 13)
-SOLID_DEGREE_PENDING = ("ffrf", "gcms", "tlf")
+SOLID_DEGREE_PENDING: tuple[str, ...] = ()
 BEAM_VARIANT_PENDING = ("nebb", "ancf")
 
 

@@ -82,7 +82,8 @@ def modes_key(model: SolidModel, count: int, tol: float) -> str:
     from fxflex.mesh.solid import mesh_key
 
     return cache.entry_key({
-        "kind": "modes", "mesh": mesh_key(model.scene.geometry, model.divisions),
+        "kind": "modes", "mesh": mesh_key(model.scene.geometry, model.divisions, model.degree),
+        **({"degree": model.degree} if model.degree != 1 else {}),
         "material": asdict(model.scene.material), "quadrature": model.quadrature_degree,
         "count": int(count), "tol": float(tol), "code": cache.code_version(*CODE_MODULES)})
 
@@ -174,8 +175,9 @@ def _fix_signs(model: SolidModel, vectors: np.ndarray) -> None:
 # -- the partition-independent cache entry ---------------------------------------------------------
 
 def _input_numbers(model: SolidModel) -> np.ndarray:
-    """Mesh-file (gmsh input) number of each owned node of ``model.V``. The P1 space and the Q1
-    geometry share the cell layout, so a node's dof and geometry index meet cell by cell."""
+    """Mesh-file (gmsh input) number of each owned node of ``model.V``. The Lagrange space and
+    the geometry share degree and cell layout (P1 on Q1 cells, P2 on 27-node cells), so a node's
+    dof and geometry index meet cell by cell."""
     geo = model.mesh.geometry
     imap = model.V.dofmap.index_map
     node_of_dof = np.full(imap.size_local + imap.num_ghosts, -1, dtype=np.int64)

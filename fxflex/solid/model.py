@@ -2,8 +2,9 @@
 
 Q1 hexahedra (paper Eq. 8) on the gmsh mesh, the root face clamped, quadrature degree set
 explicitly (2 = 2x2x2 Gauss, exact for the linear part on affine cells; the paper used 3x3x3).
-``degree=2`` gives isoparametric Q2 hexahedra (27-node geometry, 3x3x3 Gauss by default): only the
-converged reference of :mod:`fxflex.analysis.reference` uses them.
+``degree=2`` gives isoparametric Q2 hexahedra (27-node geometry, 3x3x3 Gauss by default): the
+scene key ``mesh.solid_degree`` (SPEC section 9) chooses it for FFRF, GCMS and TLF, and the
+converged reference of :mod:`fxflex.analysis.reference` uses it at any scene degree.
 Builds the loads of SPEC section 1 -- consistent nodal forces of the centerline line load and the
 tip force as a uniform traction over the tip face -- and the tip probe (the tip section centre is a
 mesh node that lives on one rank; its displacement is shared with allreduce).
@@ -16,8 +17,10 @@ import time
 import numpy as np
 import ufl
 from dolfinx import fem
+from mpi4py import MPI
 from petsc4py import PETSc
 
+from fxflex.errors import FxflexError
 from fxflex.mesh.solid import ROOT, TIP, build_solid_mesh
 from fxflex.scene import Scene
 from fxflex.scene.kinematics import rotation_z
@@ -26,20 +29,23 @@ from fxflex.solid import forms
 __all__ = ["SolidModel", "solid_dof_count"]
 
 
-def solid_dof_count(scene: Scene) -> int:
-    """Nodal unknowns after the root clamp: 3 nx (ny + 1) (nz + 1)."""
+def solid_dof_count(scene: Scene, degree: int | None = None) -> int:
+    """Nodal unknowns after the root clamp: 3 p nx (p ny + 1) (p nz + 1) for elements of degree
+    p (``mesh.solid_degree`` unless given): 3 nx (ny + 1) (nz + 1) for the paper's Q1."""
+    p = scene.mesh.solid_degree if degree is None else degree
     nx, ny, nz = scene.mesh.solid
-    return 3 * nx * (ny + 1) * (nz + 1)
+    return 3 * p * nx * (p * ny + 1) * (p * nz + 1)
 
 
 class SolidModel:
     """Mesh, function space, clamp, loads and tip probe of the solid beam."""
 
     def __init__(self, scene: Scene, comm, *, divisions=None, quadrature_degree: int | None = None,
-                 degree: int = 1):
+                 degree: int | None = None):
         t0 = time.perf_counter()
         self.scene, self.comm = scene, comm
         self.divisions = tuple(divisions or scene.mesh.solid)
+        degree = scene.mesh.solid_degree if degree is None else int(degree)
         self.degree = degree
         quadrature_degree = 2 * degree if quadrature_degree is None else quadrature_degree
         sm = build_solid_mesh(scene.geometry, self.divisions, comm, order=degree)
@@ -130,6 +136,22 @@ class SolidModel:
         """Row sums of the consistent mass (Eq. 29): int rho N_a, per component."""
         ones = fem.Constant(self.mesh, np.ones(3))
         return self.rho * ufl.inner(ones, self.u_test) * self.dx
+
+    def lumped_mass(self) -> np.ndarray:
+        """The owned entries of the lumped (row-sum) mass, checked positive.
+
+        Q1 row sums are positive on any valid hexahedron. For the 27-node Q2 element they are the
+        tensor products of the 1-D Simpson weights (1/6, 2/3, 1/6) h times rho |det J| on an affine
+        cell, so positive as well, but a strongly curved cell could make one zero or negative;
+        central differences would then divide by it, so that is refused (FxflexError) rather than
+        run."""
+        m = self.vector(self.lumped_mass_form(), zero_clamped=False).getArray()[: self.n_owned]
+        low = self.comm.allreduce(float(m.min()) if m.size else np.inf, op=MPI.MIN)
+        if not low > 0.0:
+            raise FxflexError(f"mesh.solid_degree = {self.degree}: the lumped (row-sum) mass has "
+                              f"an entry {low:.3g} <= 0 on mesh.solid {list(self.divisions)}; "
+                              f"allowed: --mass consistent, or a finer mesh")
+        return m.copy()
 
     def mass_P_form(self):
         return forms.mass_P(self.rho, self.u_trial, self.u_test, self.dx)

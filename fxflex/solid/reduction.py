@@ -139,14 +139,17 @@ def mesh_data(model: SolidModel) -> MeshData:
 
 def reduced_key(scene: Scene, method: str, count: int, **extra) -> str:
     """Cache key of ``method``'s projections on ``count`` clamped modes of ``scene``'s mesh: mesh
-    key, material, load, count, ``extra`` (e.g. the Gram cut) and the producing source (the
-    quadrature degree is SolidModel's default, covered by its source)."""
+    key (with the element degree, ``mesh.solid_degree``), material, load, count, ``extra`` (e.g.
+    the Gram cut) and the producing source (the quadrature degree is SolidModel's default for the
+    degree, covered by its source)."""
     from fxflex.mesh.solid import mesh_key
     from fxflex.solid.cms import CODE_MODULES
 
     load = scene.load
     return cache.entry_key({
-        "kind": method, "mesh": mesh_key(scene.geometry, scene.mesh.solid),
+        "kind": method,
+        "mesh": mesh_key(scene.geometry, scene.mesh.solid, scene.mesh.solid_degree),
+        **({"degree": scene.mesh.solid_degree} if scene.mesh.solid_degree != 1 else {}),
         "material": dataclasses.asdict(scene.material),
         "load": {"line_load": load.line_load, "tip_force": list(load.tip_force)},
         "count": int(count), **extra,

@@ -58,7 +58,7 @@ class Dynamics:
         t1 = time.perf_counter()
         self.mass = tlf.mass_kind
         if self.mass == "lumped":
-            self.m = owned(model.vector(model.lumped_mass_form(), zero_clamped=False), n)
+            self.m = model.lumped_mass()          # refused unless every entry > 0
             self.m_inv = 1.0 / self.m
         else:
             Mf = model.compile(model.mass_form())
@@ -133,12 +133,13 @@ def owned(vec: PETSc.Vec, n: int) -> np.ndarray:
 
 def scalar_mass(model: SolidModel) -> PETSc.Mat:
     """The scalar consistent mass int rho N_a N_b (Eq. 29 per component), root rows and columns
-    replaced by the identity. Its P1 space numbers the nodes as the vector space does (checked)."""
-    V1 = fem.FunctionSpace(model.mesh, ("Lagrange", 1))
+    replaced by the identity. Its scalar space (Lagrange of the model's degree) numbers the nodes
+    as the vector space does (checked)."""
+    V1 = fem.FunctionSpace(model.mesh, ("Lagrange", model.degree))
     im, imv = V1.dofmap.index_map, model.V.dofmap.index_map
     if not (np.array_equal(V1.dofmap.list.array, model.V.dofmap.list.array)
             and im.size_local == imv.size_local and np.array_equal(im.ghosts, imv.ghosts)):
-        raise RuntimeError("scalar and vector P1 spaces number the nodes differently")
+        raise RuntimeError("scalar and vector spaces number the nodes differently")
     u, v = ufl.TrialFunction(V1), ufl.TestFunction(V1)
     bc = fem.dirichletbc(0.0, model.root_nodes, V1)
     return model.matrix(fem.form(model.rho * u * v * model.dx), bcs=[bc])

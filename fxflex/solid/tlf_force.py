@@ -16,7 +16,7 @@ from fxflex.solid.model import SolidModel
 __all__ = ["KERNEL_FLAGS", "UflForce", "make_force"]
 
 #: C flags for the residual kernel of the time loop: vector instructions of this CPU and
-#: reassociated sums (the kernel's sums over the 8 nodes then vectorise), NaN and inf still
+#: reassociated sums (the kernel's sums over the cell's nodes then vectorise), NaN and inf still
 #: propagate (no -ffinite-math-only). 4.7 -> 3.7 ms per evaluation on the default mesh.
 KERNEL_FLAGS = ["-O2", "-march=native", "-fno-math-errno", "-fno-trapping-math",
                 "-fno-signed-zeros", "-fassociative-math"]
@@ -38,9 +38,10 @@ class UflForce:
                              jit_params={"cffi_extra_compile_args": KERNEL_FLAGS})
         self.constants = cpp.fem.pack_constants(self.form)
         self.coeffs = cpp.fem.pack_coefficients(self.form)
-        (self._packed,) = self.coeffs.values()          # (cells, 24), refilled in place
+        (self._packed,) = self.coeffs.values()          # (cells, 3 x nodes), refilled in place
         n_cells = self._packed.shape[0]
-        nodes = model.V.dofmap.list.array.reshape(-1, 8)[:n_cells]
+        per_cell = model.V.dofmap.dof_layout.num_dofs    # 8 (Q1) or 27 (Q2) nodes
+        nodes = model.V.dofmap.list.array.reshape(-1, per_cell)[:n_cells]
         self._gather = (3 * nodes[:, :, None] + np.arange(3)).reshape(-1)
         self._flat = self._packed.reshape(-1)
         self.build_time = time.perf_counter() - t0
@@ -56,7 +57,9 @@ class UflForce:
 
 
 def make_force(kind: str, model: SolidModel) -> UflForce | InvariantForce:
-    """The internal force route ``kind`` (``ufl`` or ``invariant``, --force-eval) on the model."""
+    """The internal force route ``kind`` (``ufl`` or ``invariant``, --force-eval) on the model.
+    The invariant route is Q1 only: on Q2 it refuses with the memory it would need
+    (:func:`fxflex.solid.tlf_invariants.refuse_degree`)."""
     if kind == "ufl":
         return UflForce(model)
     return InvariantForce(model)

@@ -27,7 +27,7 @@ def largest_frequency(model: SolidModel, mass: str, *, tol: float = 1e-8) -> flo
     if mass == "lumped":
         m = model.vector(model.lumped_mass_form(), zero_clamped=False)
         owned = m.getArray()                       # ghost slots are not used by the scaling
-        owned[:] = 1.0 / np.sqrt(owned)
+        owned[:] = 1.0 / np.sqrt(model.lumped_mass())      # the same entries, checked > 0
         owned[(3 * model.root_owned[:, None] + np.arange(3)).reshape(-1)] = 1.0
         K.diagonalScale(m, m)
         eps.setOperators(K)

@@ -50,10 +50,37 @@ from petsc4py import PETSc
 from fxflex import cache
 
 __all__ = ["CellGradients", "cell_gradients", "InvariantForce", "invariant_key",
-           "assemble_invariants"]
+           "assemble_invariants", "refuse_degree", "q2_bytes"]
 
 #: unordered node pairs (a <= b) of a Q1 hexahedron: 36 of the paper's 64 ordered ones
 _IA, _IB = np.triu_indices(8)
+
+
+def q2_bytes(cells: int) -> float:
+    """Bytes the invariant matrices would take on ``cells`` 27-node hexahedra: per cell 378 node
+    pairs (27 x 28 / 2, against 36 on Q1), so the upper half of K_N3 holds 378 x 379 / 2 and K_N2
+    378 x 81 entries per cell, 12 bytes each (value and column index), before the entries of
+    cells sharing nodes merge (at most a factor 2 less on these meshes): 1.2 MB per cell, about
+    50 kB per unknown (a Q2 cell adds about 8 nodes), against 1530 entries per cell and the
+    measured 12 kB per unknown of Q1. Assembly holds a further 24 bytes per cell entry of a
+    1024-cell chunk, and an evaluation streams the whole of K_N3 (slower than the UFL kernel)."""
+    pairs = 27 * 28 // 2
+    return float(cells) * (pairs * (pairs + 1) // 2 + pairs * 81) * 12.0
+
+
+def refuse_degree(model) -> None:
+    """The invariant route is built for Q1 (8-node cells, 36 node pairs): refuse any other degree
+    with one line giving the memory it would need (:func:`q2_bytes`). Collective."""
+    from fxflex.errors import FxflexError
+
+    if model.degree == 1:
+        return
+    cells = model.mesh.topology.index_map(3).size_global
+    raise FxflexError(f"--force-eval invariant: not built for mesh.solid_degree = {model.degree} "
+                      f"(its K_N3 and K_N2 would need about {q2_bytes(cells) / 1e6:.3g} MB on "
+                      f"mesh.solid {list(model.divisions)}, "
+                      f"{q2_bytes(cells) / model.dof / 1e3:.3g} kB per unknown against 12 kB on "
+                      f"Q1); allowed: --force-eval ufl, or mesh.solid_degree = 1")
 
 
 class CellGradients:
@@ -145,6 +172,7 @@ def invariant_key(model) -> str:
         model.V.dofmap.list.array.reshape(-1, 8)[:n_cells], dtype=np.int64).tobytes())
     return cache.entry_key({"kind": "tlf-invariants", "lame": list(model.scene.material.lame),
                             "quadrature": model.quadrature_degree, "local": local.hexdigest(),
+                            **({"degree": model.degree} if model.degree != 1 else {}),
                             "code": cache.code_version(__name__)})
 
 
@@ -205,6 +233,7 @@ class InvariantForce:
 
     def __init__(self, model, *, chunk: int = 1024, use_cache: bool = True):
         t0 = time.perf_counter()
+        refuse_degree(model)                     # Q1 only (8-node cells, 36 node pairs)
         key = invariant_key(model) if use_cache and cache.enabled("tlf-invariants") else None
         arrays = cache.load("tlf-invariants", key) if key else None
         self.from_cache = arrays is not None
