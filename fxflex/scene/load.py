@@ -99,7 +99,7 @@ def validate_for(method: str, scene: Scene) -> None:
 
 #: methods that refuse the SPEC section 9 keys until they carry them (issue 13)
 SOLID_DEGREE_PENDING = ("ffrf", "gcms", "tlf")
-BEAM_VARIANT_PENDING = ("nebb", "ancf")
+BEAM_VARIANT_PENDING: tuple[str, ...] = ()
 
 
 def _read_toml(path: str | os.PathLike) -> dict:
