@@ -104,8 +104,8 @@ def observed_order(meshes, tips, ref):
 def test_nebb_slender_spinup_converges_without_membrane_locking():
     """5 s of the issue's spin-up at 2 ms (the window shortened, the step coarsened: the observed
     order in the elements is what is checked): the slope fitted on 5 / 10 / 20 elements against
-    each variant's own 80-element run. Measured: locking-free order 2.0, 10 elements within 0.11 %;
-    paper order 1.1, 10 elements 16 % off."""
+    each variant's own 80-element run. Measured: locking-free order 2.04, 10 elements within 0.025 %;
+    paper order 1.27, 10 elements 16 % off."""
     meshes = np.array([5, 10, 20])
     orders, err10 = {}, {}
     for variant in ("paper", "locking-free"):
