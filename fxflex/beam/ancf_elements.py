@@ -28,11 +28,20 @@ DPN = 3 * SLOTS
 
 
 def elasticity_matrix(scene: Scene) -> np.ndarray:
-    """Isotropic 6 x 6 matrix of moduli, Voigt order xx yy zz xy yz zx, engineering shears."""
+    """6 x 6 matrix of moduli, Voigt order xx yy zz xy yz zx, engineering shears.
+
+    ``mesh.beam_variant = "paper"``: isotropic St.Venant-Kirchhoff (lambda, mu). ``"locking-free"``:
+    the normal strains uncoupled, each with Young's modulus (sigma_XX = E eps_XX as in beam
+    theory, no Poisson coupling between the axial and the transverse normal strains), the shears
+    with the material's G = mu: Sopanen and Mikkola's nu = 0 for the normal block, keeping the
+    true shear modulus for torsion and shear (docs/beams.md, "Locking-free variants")."""
     lam, mu = scene.material.lame
     C = np.zeros((6, 6))
-    C[:3, :3] = lam
-    C[:3, :3] += 2 * mu * np.eye(3)
+    if scene.mesh.beam_variant == "paper":
+        C[:3, :3] = lam
+        C[:3, :3] += 2 * mu * np.eye(3)
+    else:
+        C[:3, :3] = scene.material.E * np.eye(3)
     C[3:, 3:] = mu * np.eye(3)
     return C
 

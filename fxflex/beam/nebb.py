@@ -18,6 +18,13 @@ Y and Z coefficients) w = d^T B B^T d and the invariant tensors of Eq. 48 are
 (:class:`~fxflex.beam.invariants.GramChain`); ``"element"`` integrates the element matrix of Eq. 66
 at the Gauss points every step, K_Ne = l_e int [B_N^T E_1^T L_2 N_E + 1/2 N_E^T L_2^T E_1 B_N +
 1/2 B_N^T E_3 B_N] dxi with B_N from Eq. 45, and assembles K_Ne W_e.
+
+``mesh.beam_variant = "locking-free"`` (docs/beams.md, "Locking-free variants"): the membrane
+strain of Eq. 45 takes the element mean of the von Karman term, eps_X = W_X' + mean_e(w) / 2 -
+Z0 W_Z'' - Y0 W_Y'' (the L2 projection of w / 2 onto the constants, the space of the P1 axial
+strain W_X'), which removes membrane locking. In the tensors d_p d_q becomes its element mean
+D_pq = mean_e(d_p d_q): T1[k, p, q] = (int e1_k dX) D_pq, T4 = (int E A dX) D_pq D_rs; in Eq. 66
+B_N becomes its element mean. Same coordinates, same cost per step.
 """
 
 from __future__ import annotations
@@ -48,6 +55,7 @@ class NEBB(FloatingFrameBeam):
         super().__init__(scene, "nebb")
         t0 = time.perf_counter()
         self.force_eval = force_eval or FORCE_EVAL["nebb"][0]
+        self.variant = scene.mesh.beam_variant
         line, tab = self.line, self.tab
         sec, dx = line.sec, line.dx
         E = scene.material.E
@@ -56,8 +64,13 @@ class NEBB(FloatingFrameBeam):
         self.e1 = (EA[..., None] * tab.B[None, :, 0, :] - (E * sec.S_Y)[..., None] * tab.B[:, 1]
                    - (E * sec.S_Z)[..., None] * tab.B[:, 2])                  # (n_el, nq, 12)
         d = tab.d
-        T1 = np.einsum("eq,eqk,qp,qr->ekpr", dx, self.e1, d, d)
-        T4 = np.einsum("eq,qp,qr,qs,qt->eprst", dx * EA, d, d, d, d)
+        if self.variant == "paper":
+            T1 = np.einsum("eq,eqk,qp,qr->ekpr", dx, self.e1, d, d)
+            T4 = np.einsum("eq,qp,qr,qs,qt->eprst", dx * EA, d, d, d, d)
+        else:                       # element-mean membrane strain: D_pq = mean_e(d_p d_q)
+            D = np.einsum("q,qp,qr->pr", line.w, d, d)
+            T1 = np.einsum("eqk,pr->ekpr", dx[..., None] * self.e1, D)
+            T4 = np.einsum("e,pr,st->eprst", np.sum(dx * EA, axis=1), D, D)
         self.engine = GramChain(T1, T4, dpn=6, spn=2, emap=SLOT_MAP, esign=SLOT_SIGN,
                                 system=self.force_eval == "invariant")
         # Eq. 66 work arrays
@@ -67,6 +80,7 @@ class NEBB(FloatingFrameBeam):
         self._wY, self._wZ = np.zeros((n_el, nq)), np.zeros((n_el, nq))
         self._bn, self._bt = np.zeros((n_el, nq, 12)), np.zeros((n_el, nq, 12))
         self._a2 = np.zeros((n_el, nq, 12))
+        self._bmean = np.zeros((n_el, 12)) if self.variant != "paper" else None
         self._Ke, self._Kt = np.zeros((n_el, 12, 12)), np.zeros((n_el, 12, 12))
         self._fe = np.zeros((n_el, 12, 1))
         self.timings["invariants"] = time.perf_counter() - t0
@@ -87,6 +101,9 @@ class NEBB(FloatingFrameBeam):
         np.multiply(self._wY[..., None], tab.dY, out=bn)
         np.multiply(self._wZ[..., None], tab.dZ, out=bt)
         bn += bt
+        if self._bmean is not None:                          # locking-free: element mean of B_N
+            np.matmul(self.line.w, bn, out=self._bmean)
+            bn[...] = self._bmean[:, None, :]
         # K_Ne = sum_q dx [B_N^T e1 + 1/2 e1^T B_N + 1/2 EA B_N^T B_N]
         np.multiply(bn, dx[..., None], out=bt)
         np.multiply(bn, 0.5 * self.EA[..., None], out=self._a2)

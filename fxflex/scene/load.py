@@ -89,17 +89,6 @@ def validate_for(method: str, scene: Scene) -> None:
     if method == "ancf":
         _twist_per_element(scene, "mesh.beam_elements", scene.mesh.beam_elements,
                            "ANCF elements")
-    if scene.mesh.solid_degree != 1 and method in SOLID_DEGREE_PENDING:
-        raise SceneError("mesh.solid_degree", f"{scene.mesh.solid_degree} is not implemented for "
-                                              f"{method} yet; allowed: 1")
-    if scene.mesh.beam_variant != "paper" and method in BEAM_VARIANT_PENDING:
-        raise SceneError("mesh.beam_variant", f"{scene.mesh.beam_variant!r} is not implemented "
-                                              f"for {method} yet; allowed: \"paper\"")
-
-
-#: methods that refuse the SPEC section 9 keys until they carry them (issue 13)
-SOLID_DEGREE_PENDING: tuple[str, ...] = ()
-BEAM_VARIANT_PENDING = ("nebb", "ancf")
 
 
 def _read_toml(path: str | os.PathLike) -> dict:

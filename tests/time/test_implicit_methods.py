@@ -51,7 +51,8 @@ def free_mask(form, q, v):
 _SERIAL_TLF = pytest.mark.serial
 CASES = [pytest.param(m, None, marks=_SERIAL_TLF) if m == "tlf" else (m, None) for m in METHODS] + [
     pytest.param("tlf", "consistent", marks=_SERIAL_TLF), ("ancf-absolute", None),
-    pytest.param("tlf-absolute", None, marks=_SERIAL_TLF)]
+    pytest.param("tlf-absolute", None, marks=_SERIAL_TLF), ("nebb-locking-free", None),
+    ("ancf-locking-free", None), ("nebb-locking-free-element", None)]
 
 
 @pytest.mark.parametrize("method,mass", CASES)
@@ -67,7 +68,11 @@ def test_force_mass_and_factor_agree_with_finite_differences(method, mass):
     name, extra = method.split("-")[0], []
     if method.endswith("absolute"):
         extra = ["damping.model=\"absolute\""]
+    if "locking-free" in method:             # mesh.beam_variant (issue 13): the same interface
+        extra = ["mesh.beam_variant=\"locking-free\""]
     form = small(name, *LIVE, *extra, mass=mass)
+    if method.endswith("element"):
+        form.force_eval = "element"
     assert isinstance(form, Implicit)
     t = 0.012
     q, v = state_at(form, t)

@@ -1,0 +1,187 @@
+"""mesh.beam_variant = "locking-free" (issue 13, docs/beams.md "Locking-free variants"): NEBB with
+the element-mean membrane strain, ANCF with the Poisson coupling of the normal strains removed.
+The forces are the gradients of their energies by every evaluation route, and on the issue's
+slender beams they converge where the paper's elements lock; the paper variants are untouched."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fxflex.beam import ancf, nebb
+from fxflex.formulation import BuildOptions, build
+from fxflex.scene import Scene, load_scene
+from fxflex.time import simulate
+
+from .test_ancf import direct_force
+
+LF = {"mesh.beam_variant": "locking-free"}
+
+#: the issue's uniform slender cantilever: L = 1 m, 0.04 x 0.01 m, nu = 0.28 (default material)
+SLENDER = {"geometry.length": 1.0, "geometry.root_y": 0.04, "geometry.root_z": 0.01,
+           "geometry.tip_y": 0.04, "geometry.tip_z": 0.01, "geometry.twist_deg": 0.0,
+           "rotation.rpm": 0.0, "material.nu": 0.28, "load.line_load": -1.0}
+
+#: the issue's slender spin-up scene (L = 10 m, EA = 2.8e7 N, EI = 1.4e4 N m^2, 0 -> 6 rad/s)
+SPINUP = ["geometry.length=10.0", "geometry.root_y=0.0774597", "geometry.root_z=0.0051640",
+          "geometry.tip_y=0.0774597", "geometry.tip_z=0.0051640", "geometry.twist_deg=0.0",
+          "material.E=7.0e10", "material.nu=0.3", "material.rho=3000.0", "load.line_load=0.0",
+          "rotation.rpm=57.29578", 'rotation.profile="spin-up"', "rotation.spinup_time=15.0"]
+
+
+def rand(n, scale, seed, skip=0):
+    out = np.zeros(n)
+    out[skip:] = scale * np.random.default_rng(seed).standard_normal(n - skip)
+    return out
+
+
+# ------------------------------------------------------------------ NEBB: element-mean membrane strain
+@pytest.fixture(scope="module")
+def nebb_lf():
+    return nebb.build(Scene().replace(**LF), None)
+
+
+def test_nebb_routes_agree(nebb_lf):
+    """System invariant matrices, Eq. 66 with the element-mean B_N, element invariant matrices."""
+    form = nebb_lf
+    W = rand(form.n_full, 1e-2, 0, 6)
+    system, eq66, elem = (np.zeros(form.n_full) for _ in range(3))
+    form.engine.add_force_system(W, system)
+    form.add_force_eq66(W, eq66)
+    form.engine.add_force_element(W, elem)
+    scale = np.abs(system).max()
+    np.testing.assert_allclose(eq66, system, rtol=0, atol=1e-10 * scale)
+    np.testing.assert_allclose(elem, system, rtol=0, atol=1e-10 * scale)
+    paper = nebb.build(Scene(), None).engine.force(W)
+    assert np.abs(paper - system).max() > 1e-3 * scale          # a different force
+
+
+def test_nebb_force_is_the_gradient_of_the_mean_strain_energy(nebb_lf):
+    """Q_N = grad of 1/2 int N_L wbar + 1/8 int EA wbar^2, wbar = mean_e(W_Y'^2 + W_Z'^2), computed
+    directly at the Gauss points; the tangent is its derivative."""
+    form = nebb_lf
+    tab, dx, w = form.tab, form.line.dx, form.line.w
+
+    def energy(W):
+        ue = form.engine.element_views(W)
+        wbar = ((ue @ tab.dY.T) ** 2 + (ue @ tab.dZ.T) ** 2) @ w
+        NL = np.einsum("eqk,ek->eq", form.e1, ue)
+        return np.sum(dx * (0.5 * NL * wbar[:, None] + 0.125 * form.EA * wbar[:, None] ** 2))
+
+    W, d = rand(form.n_full, 1e-2, 1, 6), rand(form.n_full, 1.0, 2, 6)
+    h = 1e-6
+    fd = (energy(W + h * d) - energy(W - h * d)) / (2 * h)
+    assert fd == pytest.approx(form.engine.force(W) @ d, rel=1e-7)
+    K = form.nonlinear_tangent(W)
+    h = 1e-7
+    dF = (form.engine.force(W + h * d) - form.engine.force(W - h * d)) / (2 * h)
+    np.testing.assert_allclose(K @ d, dF, rtol=0, atol=1e-7 * np.abs(K @ d).max())
+
+
+def test_nebb_linear_parts_are_the_papers(nebb_lf):
+    paper = nebb.build(Scene(), None)
+    for name in ("M", "G", "N", "K", "g", "n", "fq"):
+        assert np.array_equal(getattr(nebb_lf, name), getattr(paper, name))
+
+
+def spinup_tips(variant, meshes, t_end=5.0, dt=2e-3):
+    """In-plane tip deflection W_Y at t_end of the slender spin-up, generalized-alpha."""
+    tips = []
+    for n in meshes:
+        scene = load_scene(overrides=SPINUP + [f"mesh.beam_elements={n}",
+                                               f'mesh.beam_variant="{variant}"'])
+        form = build("nebb", scene, MPI.COMM_SELF, BuildOptions(need_steady=False))
+        q, v = form.initial_state()
+        simulate(form, "generalized-alpha", dt, t_end, sample_every=10**9, state=(q, v),
+                 extras=False)
+        tips.append(form.tip(t_end, q)[1])
+    return np.array(tips)
+
+
+def observed_order(meshes, tips, ref):
+    return -np.polyfit(np.log(meshes), np.log(np.abs(tips / ref - 1)), 1)[0]
+
+
+def test_nebb_slender_spinup_converges_without_membrane_locking():
+    """5 s of the issue's spin-up at 2 ms (the window shortened, the step coarsened: the observed
+    order in the elements is what is checked): the slope fitted on 5 / 10 / 20 elements against
+    each variant's own 80-element run. Measured: locking-free order 2.04, 10 elements within 0.025 %;
+    paper order 1.27, 10 elements 16 % off."""
+    meshes = np.array([5, 10, 20])
+    orders, err10 = {}, {}
+    for variant in ("paper", "locking-free"):
+        tips = spinup_tips(variant, list(meshes) + [80])
+        orders[variant] = observed_order(meshes, tips[:3], tips[3])
+        err10[variant] = abs(tips[1] / tips[3] - 1)
+    assert orders["locking-free"] > 1.8
+    assert orders["locking-free"] > orders["paper"] + 0.6
+    assert err10["locking-free"] < 3e-3 < 0.1 < err10["paper"]
+
+
+# ------------------------------------------------------------------ ANCF: no Poisson coupling
+@pytest.fixture(scope="module")
+def ancf_lf():
+    return ancf.build(Scene().replace(**LF, **{"mesh.beam_elements": 4}), None)
+
+
+def test_ancf_moduli():
+    """Normal strains uncoupled, each with E; shears with the material's G."""
+    scene = Scene().replace(**LF)
+    C = ancf.elasticity_matrix(scene)
+    E, G = scene.material.E, scene.material.G
+    np.testing.assert_array_equal(C, np.diag([E, E, E, G, G, G]))
+    paper = ancf.elasticity_matrix(Scene())
+    assert paper[0, 1] > 0 and paper[3, 3] == G
+
+
+def test_ancf_force_is_the_green_lagrange_force_of_its_moduli(ancf_lf):
+    """The invariant tensors of the modified moduli against a direct Green-strain integration;
+    the two evaluation routes agree; rigid motion gives no force."""
+    form = ancf_lf
+    e = form.e0 + rand(form.n_full, 2e-2, 0)
+    direct = direct_force(form, e)
+    atol = 1e-11 * np.abs(direct).max()
+    np.testing.assert_allclose(form.elastic_force(e), direct, rtol=0, atol=atol)
+    form.force_eval = "element"
+    try:
+        np.testing.assert_allclose(form.elastic_force(e), direct, rtol=0, atol=atol)
+    finally:
+        form.force_eval = "invariant"
+    e3 = form.e0.reshape(-1, 7, 3) @ np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0, 0, 1.0]]).T
+    scale = np.abs(form.KL_dense @ (e3.reshape(-1) - form.e0)).max()
+    assert np.abs(form.elastic_force(e3.reshape(-1))).max() < 1e-12 * scale
+
+
+def slender_cantilever(variant, n):
+    """(tip deflection / q L^4 / (8 E I) - 1, first flapwise frequency / EB - 1) at rest."""
+    scene = Scene().replace(**SLENDER, **{"mesh.beam_elements": n,
+                                          "mesh.beam_variant": variant})
+    form = ancf.build(scene, None)
+    E, rho = scene.material.E, scene.material.rho
+    A, I = 0.04 * 0.01, 0.04 * 0.01**3 / 12
+    tip = form.steady_state().tip[2]
+    lam, _ = form.linearise().modes(2)
+    omega = np.sort(np.abs(lam.imag))[0]
+    return tip / (-1.0 / (8 * E * I)) - 1, omega / (1.8751040687**2 * np.sqrt(E * I / (rho * A))) - 1
+
+
+def test_ancf_slender_cantilever_frequency_within_the_issue_target():
+    """10 elements: first flapwise frequency within 0.3 % of Euler-Bernoulli (paper: +1.6 %)."""
+    defl, freq = slender_cantilever("locking-free", 10)
+    assert abs(freq) < 3e-3                                   # measured +0.187 %
+    assert abs(defl) < 4e-3                                   # measured -0.325 %
+    p_defl, p_freq = slender_cantilever("paper", 10)
+    assert p_freq > 1.5e-2 and p_defl < -2.5e-2
+
+
+@pytest.mark.xfail(strict=True, reason="the section gradients are linear in X (Eq. 52): the "
+                   "curvature the continuum strain sees is constant per element, so the "
+                   "uniformly loaded cantilever converges at second order, -0.325 % at 10 "
+                   "elements (docs/beams.md)")
+def test_ancf_slender_cantilever_deflection_within_the_issue_target():
+    assert abs(slender_cantilever("locking-free", 10)[0]) < 3e-3
+
+
+def test_ancf_slender_cantilever_converges_at_second_order():
+    errs = np.array([slender_cantilever("locking-free", n)[0] for n in (5, 10, 20)])
+    order = -np.polyfit(np.log([5, 10, 20]), np.log(np.abs(errs)), 1)[0]
+    assert order > 1.9                                        # measured 2.07
