@@ -79,7 +79,8 @@ def validate_for(method: str, scene: Scene) -> None:
     if method in ("ffrf", "gcms", "tlf"):
         nx, ny, nz = scene.mesh.solid
         _twist_per_element(scene, "mesh.solid", nx, "divisions along X")
-        dof = 3 * nx * (ny + 1) * (nz + 1)
+        p = scene.mesh.solid_degree             # nodal unknowns after the clamp (solid_dof_count)
+        dof = 3 * p * nx * (p * ny + 1) * (p * nz + 1)
         modes = {"ffrf": scene.reduction.ffrf_modes, "gcms": scene.reduction.gcms_modes // 3}
         if method in modes and modes[method] > dof:
             key = "reduction.ffrf_modes" if method == "ffrf" else "reduction.gcms_modes"
