@@ -177,7 +177,7 @@ def _efficiency_rows(eff: dict) -> list[dict]:
                                    ("tlf", ">= 10", lambda r: r >= 10.0),
                                    ("nebb", "slight (> 1)", lambda r: 1.0 < r < 2.0)):
         e = eff.get(method)
-        if e:
+        if e and "ratio" in e:
             out.append({"figure": f"Sect. 4.2: {method.upper()}-{e['integrator'].upper()} speed-up "
                                   f"of system invariant matrices over per-step integration "
                                   f"({e['without']} / invariant time per step)",

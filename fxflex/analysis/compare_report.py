@@ -251,4 +251,6 @@ def _efficiency(r) -> list[str]:
                          "ratio"],
                         [[m, e["integrator"], f"{e['invariant_ms']:.3f}",
                           f"{e['without_ms']:.3f} ({e['without']})", f"{e['ratio']:.2f}"]
+                         if "ratio" in e else [m, e["integrator"], "-", f"- ({e['without']})",
+                                               f"not measured: {e['skipped']}"]
                          for m, e in eff.items()]), ""]

@@ -172,3 +172,21 @@ def test_full_prints_its_estimate_first(tmp_path):
     assert d["full"] is True and d["windows"]["tlf_s"] is None
     assert d["estimate"]["runs"] == 5 and d["estimate"]["total_s"] > 0
     assert {s["case"]["t_end"] for s in d["transients"]} == {0.02}
+
+
+@pytest.mark.serial
+def test_quadratic_solids_compare_without_the_refused_invariant_route(tmp_path):
+    """``fxflex compare --set mesh.solid_degree=2`` (issue 13): TLF's invariant route refuses Q2,
+    so the efficiency spot check says so for TLF instead of stopping the study; the rest runs."""
+    lines = []
+    res = run_compare(load_scene(overrides=["mesh.solid=[6,2,2]", "mesh.solid_degree=2"]),
+                      ["tlf", "nebb"], str(tmp_path), MPI.COMM_WORLD, progress=lines.append,
+                      paper_window=1e-4, tlf_windows={"speeds": 5e-5, "steps": 5e-5,
+                                                      "damping": 5e-5})
+    eff = res["efficiency"]
+    assert "mesh.solid_degree = 2" in eff["tlf"]["skipped"] and "ratio" not in eff["tlf"]
+    assert eff["nebb"]["ratio"] > 0
+    assert not any(row["figure"].startswith("Sect. 4.2: TLF") for row in res["paper"])
+    assert any(row["figure"].startswith("Sect. 4.2: NEBB") for row in res["paper"])
+    assert "not measured: --force-eval invariant" in (tmp_path / "report.md").read_text()
+    assert any(line.startswith("  tlf: not measured") for line in lines)
