@@ -205,14 +205,8 @@ def run(form: Formulation, t_end: float = 0.01, *, integrator: str | None = None
                        keep_history=history, extras=writer is not None or history,
                        rho_inf=rho_inf)
     except BaseException as exc:
-        if writer is not None:      # no half-written file after a failed write; else flushed
-            if isinstance(exc, OutputError):
-                writer.abandon()
-            else:
-                try:
-                    writer.close()
-                except OutputError:
-                    pass
+        if writer is not None:
+            writer.close_after(exc)
         raise
     if writer is not None:
         writer.close()

@@ -508,13 +508,7 @@ def _simulate_with_outputs(args, comm, form, plan: _RunPlan, state, resume, fiel
     except BaseException as exc:
         # Collective clean-up only when every rank is here together.
         if writer is not None:
-            if isinstance(exc, OutputError):
-                writer.abandon()
-            else:
-                try:
-                    writer.close()
-                except OutputError:
-                    pass
+            writer.close_after(exc)
         if fields is not None and (comm.size == 1 or getattr(exc, "collective", False)):
             fields.close()
         raise

@@ -124,6 +124,18 @@ class SeriesWriter:
                 self._fh.close()
             self._fh = None
 
+    def close_after(self, exc: BaseException) -> None:
+        """Clean up after ``exc`` stopped the run: a failed write (:class:`OutputError`) leaves
+        no half-written series (:meth:`abandon`); anything else keeps what was written, flushed
+        (:meth:`close`), a second output failure there not raised over ``exc``."""
+        if isinstance(exc, OutputError):
+            self.abandon()
+            return
+        try:
+            self.close()
+        except OutputError:
+            pass
+
     def abandon(self) -> str:
         """Stop writing and put the file back to what a checkpoint refers to (or remove a new
         file none refers to); what was done, for the error message."""

@@ -138,7 +138,7 @@ def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: in
         t = t0 + k * dt if t is None else t
         norm2 = float(np.dot(q, q) + np.dot(v, v))
         if distributed:
-            norm2 = form.comm.allreduce(norm2)
+            norm2 = comm.allreduce(norm2)
         if not math.isfinite(norm2):
             return {"time_s": t, "kind": "non-finite",
                     "reason": "NaN or inf in the state (or a state beyond 1e154)"}
