@@ -88,13 +88,18 @@ class PetscLinearisation:
     roots are computed -- a rotating beam loses stability through its low modes (a root through
     zero, or low modes merging); the high ones are damped at about -c/(2 rho) and hardly moved by
     the rotation -- at least ``min_pairs`` of them, kept, so that the verdict after a modal
-    analysis costs nothing. Collective on the matrices' communicator."""
+    analysis costs nothing. Collective on the matrices' communicator.
+
+    With ``reassemble`` (a callable giving (M, C, K) afresh) the matrices are freed after each
+    eigensolve, as a distributed model's memory asks, and assembled again only for a later solve
+    that wants more roots."""
 
     kind = "petsc"
 
     def __init__(self, M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, *, min_pairs: int = 8,
-                 rtol: float = 1e-8):
+                 rtol: float = 1e-8, reassemble=None):
         self.M, self.C, self.K = M, C, K
+        self._reassemble = reassemble
         self.dof = K.getSize()[0]
         self.min_pairs = min_pairs      # lowest pairs behind eigenvalues(), stable(), growth_rate()
         self.rtol = rtol                # a root grows when Re > rtol max|lambda| (PEP residual)
@@ -111,10 +116,15 @@ class PetscLinearisation:
         pairs = min(pairs, self.dof)
         if self._modes is None or self._modes[2] < pairs:
             count = min(max(pairs, self.min_pairs), self.dof)
+            if self.K is None:
+                self.M, self.C, self.K = self._reassemble()
             try:
                 lam, X, _ = pep_eigen(self.M, self.C, self.K, count)
             except EigenNotConverged as exc:
                 lam, X = exc.eigenvalues, exc.vectors
+            finally:
+                if self._reassemble is not None:
+                    self.destroy()
             keep = conjugate_pairs(lam)[:count]
             self._modes = (lam[keep], X[:, keep] if X is not None else None, count)
         lam, X, _ = self._modes
@@ -153,4 +163,6 @@ class PetscLinearisation:
 
     def destroy(self) -> None:
         for A in (self.M, self.C, self.K):
-            A.destroy()
+            if A is not None:
+                A.destroy()
+        self.M = self.C = self.K = None

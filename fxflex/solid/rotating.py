@@ -22,6 +22,8 @@ rank numbers in the order of its owned entries.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import ufl
 from dolfinx import fem
@@ -32,13 +34,13 @@ from fxflex.scene.kinematics import P3, S3
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel
 
-__all__ = ["Linearisation", "tlf_linearisation", "free_entries"]
+__all__ = ["Linearisation", "tlf_linearisation", "tlf_matrices", "free_entries"]
 
 
 class Linearisation(PetscLinearisation):
     """(M, C, K) on the free coordinates, with the PEP analysis of
-    :class:`~fxflex.numerics.petsc.PetscLinearisation`; ``free`` maps the coordinates to this
-    rank's owned entries."""
+    :class:`~fxflex.numerics.petsc.PetscLinearisation` (``analysis``: its min_pairs, rtol,
+    reassemble); ``free`` maps the coordinates to this rank's owned entries."""
 
     def __init__(self, M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, free: np.ndarray, n_owned: int,
                  **analysis):
@@ -74,8 +76,18 @@ def _nodal(model: SolidModel, m: np.ndarray, free: np.ndarray, B: np.ndarray) ->
 
 def tlf_linearisation(model: SolidModel, U: np.ndarray, omega: float, c_rho: float,
                       absolute: bool, mass: str, **analysis) -> Linearisation:
-    """(M, C, K) of the module docstring about the owned steady displacement U (O-XYZ) at speed
-    omega (rad/s), with the ``consistent`` or ``lumped`` mass. Collective on ``model.comm``."""
+    """The linearisation of the module docstring about the owned steady displacement U (O-XYZ) at
+    speed omega (rad/s), with the ``consistent`` or ``lumped`` mass; its matrices live only for
+    an eigensolve and are assembled again if a later one asks for more roots. Collective on
+    ``model.comm``."""
+    args = (model, U, omega, c_rho, absolute, mass)
+    return Linearisation(*tlf_matrices(*args), free_entries(model), model.n_owned,
+                         reassemble=functools.partial(tlf_matrices, *args), **analysis)
+
+
+def tlf_matrices(model: SolidModel, U: np.ndarray, omega: float, c_rho: float, absolute: bool,
+                 mass: str) -> tuple[PETSc.Mat, PETSc.Mat, PETSc.Mat]:
+    """(M, C, K) of the module docstring, assembled. Collective on ``model.comm``."""
     free = free_entries(model)
     first = model.V.dofmap.index_map.local_range[0] * 3
     rows = PETSc.IS().createGeneral((first + free).astype(PETSc.IntType), comm=model.comm)
@@ -118,4 +130,4 @@ def tlf_linearisation(model: SolidModel, U: np.ndarray, omega: float, c_rho: flo
         K.axpy(1.0, inertia, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         inertia.destroy()
     rows.destroy()
-    return Linearisation(M, C, K, free, model.n_owned, **analysis)
+    return M, C, K
