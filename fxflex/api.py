@@ -52,6 +52,9 @@ __all__ = ["Scene", "load_scene", "scene_from_dict", "SceneError", "FxflexError"
 
 #: the series columns every run writes first (SPEC section 8); ``form.extra_columns`` follow
 SERIES_COLUMNS = ("t_s", "longitudinal_m", "orthogonal_m", "load_m")
+#: how :func:`run` names its options in messages (fxflex.time.driver.plan_integration)
+API_NAMES = {"dt": "dt", "t_end": "t_end", "rho_inf": "rho_inf",
+             "implicit": "the generalized-alpha integrator"}
 
 
 def _comm(comm):
@@ -155,30 +158,20 @@ def run(form: Formulation, t_end: float = 0.01, *, integrator: str | None = None
     from fxflex.io.paths import Output, check_paths
     from fxflex.time import simulate
     from fxflex.time.diagnosis import ab2_warning
-    from fxflex.time.driver import step_to_end
-    from fxflex.time.generalized_alpha import DEFAULT_RHO_INF
+    from fxflex.time.driver import plan_integration, sample_steps
 
     if not t_end > 0:
         raise FxflexError(f"t_end: must be > 0, got {t_end!r}")
     scene, comm = form.scene, form.comm
-    integrator, asked = default_integration(form.method, integrator, dt, scene.rotation.rpm)
-    step, nsteps = step_to_end(t_end, asked)
-    if dt is not None and step != asked:
-        _warnings.warn(f"dt {asked:g} s does not divide t_end {t_end:g} s: the step was "
-                       f"shortened to {step:.9g} s ({nsteps} steps) to end at t_end",
-                       stacklevel=2)
-    if integrator == "generalized-alpha":
-        rho_inf = DEFAULT_RHO_INF if rho_inf is None else rho_inf
-        if not 0.0 <= rho_inf <= 1.0:
-            raise FxflexError(f"rho_inf: must lie in [0, 1] (spectral radius at infinity), "
-                              f"got {rho_inf:g}")
-    elif rho_inf is not None:
-        raise FxflexError(f"rho_inf: only applies to the generalized-alpha integrator (the "
-                          f"integrator is {integrator})")
+    plan = plan_integration(form.method, integrator, dt, t_end, rho_inf, scene.rotation.rpm,
+                            names=API_NAMES)
+    integrator, step, nsteps, rho_inf = plan.integrator, plan.dt, plan.steps, plan.rho_inf
+    if plan.note:
+        _warnings.warn(plan.note, stacklevel=2)
     if sample_dt is not None and not sample_dt > 0:
         raise FxflexError(f"sample_dt: must be > 0, got {sample_dt!r}")
     sampled = out is not None or history or on_sample is not None
-    sample_every = max(1, int(round((sample_dt or max(step, t_end / 20000)) / step)))
+    sample_every = sample_steps(step, t_end, sample_dt)
     if not sampled:
         sample_every = nsteps       # nothing reads the samples: only the final deflection
     writer = None

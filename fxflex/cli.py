@@ -327,27 +327,12 @@ def _run_integration(args, scene, comm, warnings: list[str]
                      ) -> tuple[str, float, int, float | None]:
     """(integrator, dt, steps, rho_inf): the paper's integration unless given, the step shortened
     to end exactly at --t-end (a warning says so), rho_inf for generalized-alpha only."""
-    from fxflex.formulation import default_integration
-    from fxflex.time.driver import step_to_end
+    from fxflex.time.driver import plan_integration
 
-    integrator, asked = default_integration(args.method, args.integrator, args.dt,
-                                            scene.rotation.rpm)
-    dt, nsteps = step_to_end(args.t_end, asked)
-    if args.dt is not None and dt != asked:
-        _warn(comm, warnings,
-              f"--dt {asked:g} s does not divide --t-end {args.t_end:g} s: the step was "
-              f"shortened to {dt:.9g} s ({nsteps} steps) to end at t_end")
-    rho_inf = None
-    if integrator == "generalized-alpha":
-        from fxflex.time.generalized_alpha import DEFAULT_RHO_INF
-        rho_inf = DEFAULT_RHO_INF if args.rho_inf is None else args.rho_inf
-        if not 0.0 <= rho_inf <= 1.0:
-            raise FxflexError(f"--rho-inf: must lie in [0, 1] (spectral radius at infinity), "
-                              f"got {args.rho_inf:g}")
-    elif args.rho_inf is not None:
-        raise FxflexError(f"--rho-inf: only applies to --integrator generalized-alpha "
-                          f"(the integrator is {integrator})")
-    return integrator, dt, nsteps, rho_inf
+    plan = plan_integration(args.method, args.integrator, args.dt, args.t_end, args.rho_inf,
+                            scene.rotation.rpm)
+    _warn(comm, warnings, plan.note)
+    return plan.integrator, plan.dt, plan.steps, plan.rho_inf
 
 
 def _plan_run(args, scene, comm) -> _RunPlan:
@@ -355,6 +340,7 @@ def _plan_run(args, scene, comm) -> _RunPlan:
     integration, --resume (the checkpoint read back and its settings matched), the sampling,
     the checkpoint path and interval, and every output path (:func:`_check_run_paths`)."""
     from fxflex.io.checkpoint import check_settings, load_checkpoint
+    from fxflex.time.driver import sample_steps
 
     warnings: list[str] = []
     integrator, dt, nsteps, rho_inf = _run_integration(args, scene, comm, warnings)
@@ -373,8 +359,7 @@ def _plan_run(args, scene, comm) -> _RunPlan:
         if series is None and args.out:
             raise FxflexError("--out: the checkpointed run wrote no series; resume without --out")
         out_path = args.out if args.out is not None else (series["path"] if series else None)
-    sample_dt = args.sample_dt or max(dt, args.t_end / 20000)
-    sample_every = max(1, int(round(sample_dt / dt)))
+    sample_every = sample_steps(dt, args.t_end, args.sample_dt)
     if not (out_path or args.fields):
         sample_every = nsteps       # nothing to write: only the final deflection is reported
     settings = {"method": args.method, "integrator": integrator, "dt_s": dt,

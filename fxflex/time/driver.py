@@ -38,11 +38,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fxflex.formulation import SMALL_DEFORMATION_RANGE
-from fxflex.time.generalized_alpha import NewtonFailure
+from fxflex.errors import FxflexError
+from fxflex.formulation import SMALL_DEFORMATION_RANGE, default_integration
+from fxflex.time.generalized_alpha import DEFAULT_RHO_INF, NewtonFailure
 from fxflex.time.schemes import make_scheme
 
 __all__ = ["RunResult", "Resume", "simulate", "divergence_limit", "step_to_end", "GROWTH_POINTS",
+           "Integration", "plan_integration", "sample_steps", "CLI_NAMES",
            "SMALL_DEFORMATION_RANGE"]
 
 #: deflections checked for the measured growth rate of a divergence
@@ -91,6 +93,52 @@ def step_to_end(span: float, dt: float, rtol: float = 1e-9) -> tuple[float, int]
         return dt, count
     count = math.ceil(ratio)
     return span / count, count
+
+
+#: how a run's options are named in messages: the CLI's flags (the API passes its argument names)
+CLI_NAMES = {"dt": "--dt", "t_end": "--t-end", "rho_inf": "--rho-inf",
+             "implicit": "--integrator generalized-alpha"}
+
+
+@dataclass(frozen=True)
+class Integration:
+    """A run's integration, resolved and checked (:func:`plan_integration`)."""
+
+    integrator: str
+    dt: float                   # the step, shortened to end exactly at t_end
+    steps: int
+    rho_inf: float | None       # generalized-alpha only
+    note: str | None            # said when the given step was shortened
+
+
+def plan_integration(method: str, integrator: str | None, dt: float | None, t_end: float,
+                     rho_inf: float | None, rpm: float, names: dict = CLI_NAMES) -> Integration:
+    """The paper's integration unless given (:func:`fxflex.formulation.default_integration`), the
+    step shortened to end exactly at ``t_end`` (:func:`step_to_end`; ``note`` says so), rho_inf
+    for generalized-alpha only (default DEFAULT_RHO_INF, in [0, 1]); what ``fxflex run`` and
+    ``fxflex.run`` both do, each naming the options its own way (``names``)."""
+    integrator, asked = default_integration(method, integrator, dt, rpm)
+    step, steps = step_to_end(t_end, asked)
+    note = None
+    if dt is not None and step != asked:
+        note = (f"{names['dt']} {asked:g} s does not divide {names['t_end']} {t_end:g} s: the step "
+                f"was shortened to {step:.9g} s ({steps} steps) to end at t_end")
+    if integrator == "generalized-alpha":
+        given = rho_inf
+        rho_inf = DEFAULT_RHO_INF if rho_inf is None else rho_inf
+        if not 0.0 <= rho_inf <= 1.0:
+            raise FxflexError(f"{names['rho_inf']}: must lie in [0, 1] (spectral radius at "
+                              f"infinity), got {given:g}")
+    elif rho_inf is not None:
+        raise FxflexError(f"{names['rho_inf']}: only applies to {names['implicit']} (the "
+                          f"integrator is {integrator})")
+    return Integration(integrator, step, steps, rho_inf, note)
+
+
+def sample_steps(dt: float, t_end: float, sample_dt: float | None) -> int:
+    """Steps between samples: ``sample_dt`` (default: the step, or t_end / 20000 when larger,
+    so that a series holds at most about 20000 rows), rounded to whole steps."""
+    return max(1, int(round((sample_dt or max(dt, t_end / 20000)) / dt)))
 
 
 def simulate(form, integrator: str, dt: float, t_end: float, *, sample_every: int = 1,
