@@ -15,11 +15,6 @@ LOW = ("solid", "beam", "time", "numerics", "mesh", "scene", "io")
 UPPER = ("fxflex.analysis", "fxflex.bench", "fxflex.cli")
 ABOVE_NUMERICS = ("fxflex.solid", "fxflex.beam", "fxflex.time", "fxflex.analysis", "fxflex.bench",
                   "fxflex.cli")
-#: the one private SciPy import, behind csr_matvec_add: SciPy has no public y += A x without
-#: allocating (fxflex/numerics/sparse.py says why)
-PRIVATE_ALLOWED = {("fxflex.numerics.sparse", "scipy.sparse._sparsetools")}
-
-
 def _module_name(path: pathlib.Path) -> str:
     parts = path.relative_to(ROOT.parent).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
@@ -117,8 +112,7 @@ def test_no_import_cycle():
 
 def test_no_private_scipy_import():
     bad = sorted((name, m) for name, found in IMPORTS.items() for m in found
-                 if m.split(".")[0] == "scipy" and any(p.startswith("_") for p in m.split("."))
-                 and (name, m) not in PRIVATE_ALLOWED)
+                 if m.split(".")[0] == "scipy" and any(p.startswith("_") for p in m.split(".")))
     assert not bad
 
 

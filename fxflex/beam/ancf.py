@@ -37,7 +37,7 @@ from fxflex.formulation import FORCE_EVAL, BuildOptions, FormulationBase, Steady
 from fxflex.numerics.dense import DenseLU, newton, omega_max
 from fxflex.numerics.hub import HubFrameFactor
 from fxflex.numerics.qep import DenseLinearisation
-from fxflex.numerics.sparse import csr_matvec_add
+from fxflex.numerics.sparse import SparseAdd
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
 
@@ -94,7 +94,8 @@ class ANCF(FormulationBase):
         Ms = assemble_blocks(scalar_mass(rho, dV, tab.N), SLOTS, self.n_slots)
         self.KL_dense, self.Ms = KL, Ms
         self.KL = sp.csr_matrix(KL)
-        self.Ms_csr = sp.csr_matrix(Ms)
+        self.KL_add = SparseAdd(self.KL)                 # out += K_L u in the time loop
+        self.Ms_add = SparseAdd(Ms, 3)                   # M_s times the (n, 3) node field
         self.fq = line_load(scene, le, n_nodes)
         self.tip_dofs = slice(self.n_full - DPN, self.n_full - DPN + 3)
         self.Ftip = np.asarray(scene.load.tip_force, float)
@@ -161,7 +162,7 @@ class ANCF(FormulationBase):
     # ------------------------------------------------------------------ forces
     def add_elastic_force(self, u: np.ndarray, out: np.ndarray) -> None:
         """out += Q_k = (K_L + K_N) (e - e0) (Eq. 55/57)."""
-        csr_matvec_add(self.KL, u, out)
+        self.KL_add.add(u, out)
         if self.force_eval == "invariant":
             self.engine.add_force_system(u, out)
         else:
@@ -208,8 +209,7 @@ class ANCF(FormulationBase):
                 np.multiply(src[:, 0], rate, out=self._col)
                 d3[:, 1] -= self._col
             self._Md.fill(0.0)
-            Ms = self.Ms_csr
-            csr_matvec_add(Ms, d, self._Md, 3)
+            self.Ms_add.add(d, self._Md)
             self._Md *= self.c_rho
             F -= self._Md
         if not self.at_rest:                     # root acceleration (phi'' S - phi'^2 P) A e0

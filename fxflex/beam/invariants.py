@@ -32,7 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.lib.stride_tricks import as_strided
 
-from fxflex.numerics.sparse import csr_matvec_add
+from fxflex.numerics.sparse import SparseAdd
 
 __all__ = ["GramChain"]
 
@@ -164,9 +164,10 @@ class GramChain:
         smat = sp.coo_matrix((tag.astype(float) + 1.0, (rows, cols)),
                              shape=(self.n_slots, self.n_slots)).tocsr()
         smat.sort_indices()
-        self.smap = smat.data.astype(np.int64) - 1
-        self.S = smat
-        self.S.data = np.zeros_like(smat.data)
+        smap = smat.data.astype(np.int64) - 1
+        smat.data = np.zeros_like(smat.data)
+        self.S = SparseAdd(smat, self.nc)     # S (x) I_nc acting on the (slot, component) field
+        self.smap = smap[self.S.source]       # pair-vector entry behind each stored value
         # global slot map (slot, component) -> coordinate, with sign
         node = np.arange(self.n_slots) // spn
         local = np.arange(self.n_slots) % spn
@@ -206,13 +207,12 @@ class GramChain:
         self.s += self.s3
         self.K1h.matvec(self.p, self.q1)                         # K_N1 u_d u
         out += self.q1
-        np.take(self.s, self.smap, out=self.S.data, mode="clip")
-        S = self.S
+        np.take(self.s, self.smap, out=self.S.values, mode="clip")
         if self.identity_slots:
-            csr_matvec_add(S, B.reshape(-1), out.reshape(-1), self.nc)
+            self.S.add(B.reshape(-1), out.reshape(-1))
         else:
             self.SB.fill(0.0)
-            csr_matvec_add(S, B.reshape(-1), self.SB.reshape(-1), self.nc)
+            self.S.add(B.reshape(-1), self.SB.reshape(-1))
             np.dot(self.Rt, self.SB.reshape(-1), out=self.tmp)
             out += self.tmp
 
