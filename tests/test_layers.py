@@ -15,6 +15,8 @@ LOW = ("solid", "beam", "time", "numerics", "mesh", "scene", "io")
 UPPER = ("fxflex.analysis", "fxflex.bench", "fxflex.cli")
 ABOVE_NUMERICS = ("fxflex.solid", "fxflex.beam", "fxflex.time", "fxflex.analysis", "fxflex.bench",
                   "fxflex.cli")
+
+
 def _module_name(path: pathlib.Path) -> str:
     parts = path.relative_to(ROOT.parent).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)

@@ -25,7 +25,6 @@ import math
 import time
 
 import numpy as np
-import scipy.sparse as sp
 
 from fxflex.beam.ancf_elements import (DPN, QUADRATURE, SLOTS, assemble_blocks, elastic_tensors,
                                        elasticity_matrix, line_load, prism_quadrature,
@@ -93,8 +92,7 @@ class ANCF(FormulationBase):
         KL = assemble_blocks(self.KLe, DPN, self.n_full)
         Ms = assemble_blocks(scalar_mass(rho, dV, tab.N), SLOTS, self.n_slots)
         self.KL_dense, self.Ms = KL, Ms
-        self.KL = sp.csr_matrix(KL)
-        self.KL_add = SparseAdd(self.KL)                 # out += K_L u in the time loop
+        self.KL_add = SparseAdd(KL)                      # out += K_L u in the time loop
         self.Ms_add = SparseAdd(Ms, 3)                   # M_s times the (n, 3) node field
         self.fq = line_load(scene, le, n_nodes)
         self.tip_dofs = slice(self.n_full - DPN, self.n_full - DPN + 3)

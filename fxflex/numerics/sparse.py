@@ -6,10 +6,12 @@ here. PETSc's sequential AIJ product does accumulate in place (``MatMultAdd(A, x
 public API only: :class:`SparseAdd` holds the CSR arrays as the matrix's own storage
 (``MatCreateSeqAIJWithArrays`` borrows them, it does not copy) and the caller's arrays are placed
 in two work vectors for the call (``VecPlaceArray`` / ``VecResetArray``). Its row loop sums in
-CSR order as SciPy's does, y's entry first (SciPy adds it last: the sums agree to
-round-off, checked in tests/numerics/test_sparse.py). Measured on ANCF's matrices (AMD EPYC, issue 12): K_L with 10
-elements (231 rows, 10782 entries) 8.6 us against 12.0 us for SciPy's compiled kernel, the
-scalar mass times three interleaved vectors 3.1 against 3.8 us; with 80 elements 50 against 92 us.
+CSR order as SciPy's does, y's entry first (SciPy adds it last: the sums agree to round-off,
+checked in tests/numerics/test_sparse.py). Measured on ANCF's matrices (AMD EPYC, issue 12): K_L
+with 10 elements (231 rows, 10782 entries) 8.6 us against 12.0 us for SciPy's compiled kernel,
+the scalar mass times three interleaved vectors 3.1 against 3.8 us; with 80 elements 50 against
+92 us. ANCF's whole default central-difference step: the same within the noise (127.7-132.0
+against 125.9-128.8 us).
 
 Matrices whose values change between products keep their pattern: :attr:`SparseAdd.values` is the
 borrowed storage, written in place (e.g. ``np.take(s, m.source, out=m.values)``), and the next
@@ -37,17 +39,15 @@ class SparseAdd:
         a.sort_indices()
         source = np.arange(a.nnz, dtype=np.int64)
         if k > 1:
-            # kron(A, I_k): entry (i, j) of A becomes entries (i k + c, j k + c), c < k
-            tagged = sp.csr_matrix((source.astype(float) + 1.0, a.indices, a.indptr), shape=a.shape)
-            kron = sp.kron(tagged, sp.identity(k, format="csr"), format="csr")
+            # kron(A, I_k): entry (i, j) of A becomes entries (i k + c, j k + c), c < k; the
+            # tags (index + 1: no tag is a zero the product could drop) say which entry
+            tagged = sp.csr_matrix((source + 1, a.indices, a.indptr), shape=a.shape)
+            kron = sp.kron(tagged, sp.identity(k, dtype=np.int64, format="csr"), format="csr")
             kron.sort_indices()
-            source = np.rint(kron.data).astype(np.int64) - 1
-            indptr, indices = kron.indptr, kron.indices
-            shape = kron.shape
+            source = kron.data - 1
+            indptr, indices, shape = kron.indptr, kron.indices, kron.shape
         else:
             indptr, indices, shape = a.indptr, a.indices, a.shape
-        self.k = k
-        self.shape = a.shape
         #: for each stored entry, the index of the entry of A's CSR data it copies
         self.source = source
         self._indptr = np.ascontiguousarray(indptr, dtype=PETSc.IntType)

@@ -124,11 +124,10 @@ def plan_integration(method: str, integrator: str | None, dt: float | None, t_en
         note = (f"{names['dt']} {asked:g} s does not divide {names['t_end']} {t_end:g} s: the step "
                 f"was shortened to {step:.9g} s ({steps} steps) to end at t_end")
     if integrator == "generalized-alpha":
-        given = rho_inf
         rho_inf = DEFAULT_RHO_INF if rho_inf is None else rho_inf
         if not 0.0 <= rho_inf <= 1.0:
             raise FxflexError(f"{names['rho_inf']}: must lie in [0, 1] (spectral radius at "
-                              f"infinity), got {given:g}")
+                              f"infinity), got {rho_inf:g}")
     elif rho_inf is not None:
         raise FxflexError(f"{names['rho_inf']}: only applies to {names['implicit']} (the "
                           f"integrator is {integrator})")
