@@ -69,6 +69,19 @@ def _positive(name):
     return _number(name, positive=True)
 
 
+def _count(minimum: int):
+    """argparse type: an integer >= minimum."""
+    def check(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {text!r}")
+        return value
+    return check
+
+
 def _method(text):
     if text not in METHODS:
         raise argparse.ArgumentTypeError(f"{text!r} is not a method; allowed: {' '.join(METHODS)}")
@@ -191,6 +204,17 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--kind", choices=tuple(CACHE_KINDS), metavar="KIND",
                    help="only this kind: " + " | ".join(CACHE_KINDS))
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
+    p = sub.add_parser("section", help="cross-section properties along the span (2-D finite-"
+                                       "element analysis; SPEC section 9)")
+    p.add_argument("--stations", type=_count(1), metavar="N",
+                   help="N evenly spaced stations (default: the stations table's rows, or 11)")
+    p.add_argument("--resolution", type=_count(4), metavar="M",
+                   help="section mesh: M elements across the larger extent (default 40)")
+    p.add_argument("--plot", metavar="DIR",
+                   help="write section_NN.png (mesh, centroid, shear centre, principal axes) and "
+                        "blade.png into DIR")
+    _common(p)
 
     p = sub.add_parser("bench", help="benchmarks; tables written to --out")
     p.add_argument("name", choices=BENCHES, metavar="NAME", help=" | ".join(BENCHES))
@@ -688,6 +712,39 @@ def cmd_compare(args, comm) -> None:
     _emit(comm, args, payload, report + f"\n(files in {out_dir})")
 
 
+def cmd_section(args, comm) -> None:
+    """``fxflex section``: the properties of the scene's sections per station; every rank
+    computes (a section is small), rank 0 prints and plots."""
+    from fxflex.io import envelope
+    from fxflex.section.blade import section_table
+
+    scene = _scene_from_args(args)
+    if args.plot:
+        check_paths(comm, [Output("--plot", args.plot, folder=True)])
+    rows = section_table(scene, args.stations, args.resolution)
+    g = scene.geometry
+    shape = g.section + (f" {g.airfoil}" if g.section == "naca4" else "") + (
+        f", wall {g.wall:g} m" if g.wall else "")
+    lines = [f"fxflex section   scene {scene.hash}   {shape}, {len(rows)} stations "
+             f"(centroid and shear centre in m: outline coordinates / from the centroid)",
+             f"{'x m':>8} {'A m^2':>11} {'centroid':>21} {'Iy m^4':>11} {'Iz m^4':>11} "
+             f"{'Iyz m^4':>11} {'princ deg':>9} {'J m^4':>11} {'shear centre':>21} "
+             f"{'kg/m':>9}"]
+    for r in rows:
+        lines.append(f"{r['x']:8.4g} {r['A']:11.5g} {r['centroid'][0]:+10.4g},"
+                     f"{r['centroid'][1]:+10.4g} {r['Iy']:11.5g} {r['Iz']:11.5g} "
+                     f"{r['Iyz']:+11.4g} {r['principal_deg']:+9.4f} {r['J']:11.5g} "
+                     f"{r['shear_centre'][0]:+10.4g},{r['shear_centre'][1]:+10.4g} "
+                     f"{r['mass_per_length']:9.4g}")
+    if args.plot:
+        from fxflex.section.figures import plot_sections
+
+        files = _agreed(comm, plot_sections, scene, rows, args.plot, args.resolution,
+                        enabled=comm.rank == 0)
+        lines.append(f"plots: {len(files or [])} PNG files in {args.plot}")
+    _emit(comm, args, envelope(scene, stations=rows), "\n".join(lines))
+
+
 def cmd_cache(args, comm) -> None:
     """``fxflex cache info|clear [--kind KIND]``: the folder (``$FXFLEX_CACHE`` or
     ~/.cache/fxflex), what each kind holds, and whether ``FXFLEX_NO_CACHE`` bypasses it."""
@@ -720,7 +777,8 @@ def cmd_cache(args, comm) -> None:
 
 
 COMMANDS = {"cache": cmd_cache, "info": cmd_info, "steady": cmd_steady, "run": cmd_run,
-            "modes": cmd_modes, "compare": cmd_compare, "bench": cmd_bench}
+            "modes": cmd_modes, "compare": cmd_compare, "bench": cmd_bench,
+            "section": cmd_section}
 
 
 def _quiet_logs() -> None:

@@ -67,6 +67,7 @@ RANGES: dict[str, Interval] = {
     "geometry.root_y": _LENGTH, "geometry.root_z": _LENGTH,
     "geometry.tip_y": _LENGTH, "geometry.tip_z": _LENGTH,
     "geometry.hub_radius": Interval(0.0, _MAX_LENGTH, low_open=False, high_open=False),
+    "geometry.wall": _NON_NEGATIVE,
     "material.E": _POSITIVE,
     "material.nu": Interval(-1.0, 0.5),
     "material.rho": _POSITIVE,
@@ -81,6 +82,7 @@ RANGES: dict[str, Interval] = {
     "reduction.gcms_gram_tol": Interval(0.0, 1.0),
 }
 CHOICES: dict[str, tuple[str, ...]] = {
+    "geometry.section": ("rectangle", "ellipse", "naca4", "polygon"),
     "section.torsion": ("polar", "saint-venant"),
     "rotation.profile": ("constant", "spin-up"),
     "damping.model": ("relative", "absolute"),
@@ -115,6 +117,9 @@ def _coerce(key: str, value, annotation):
             raise SceneError(key, f"expected an integer, got {shown(value)}")
         return int(value)
     if annotation is str:
+        if key == "geometry.airfoil" and isinstance(value, numbers.Integral) \
+                and not isinstance(value, bool) and 0 <= value <= 9999:
+            return f"{int(value):04d}"          # --set geometry.airfoil=0012 reads as 12
         if not isinstance(value, str):
             raise SceneError(key, f"expected a string, got {shown(value)}")
         return value
@@ -165,6 +170,9 @@ def _geometry(g) -> None:
                                                "wind round the axis at more than 45 deg (a helix, "
                                                f"not a beam); allowed: |twist_deg| <= {limit:.4g} "
                                                "for this section and length")
+    from fxflex.section.blade import check_geometry
+
+    check_geometry(g)
 
 
 def _material(mat) -> None:

@@ -75,7 +75,16 @@ def _twist_per_element(scene: Scene, key: str, count: int, what: str) -> None:
 
 def validate_for(method: str, scene: Scene) -> None:
     """What only ``method`` needs of the scene: a mesh whose elements do not degenerate and a
-    modal basis no larger than the mesh."""
+    modal basis no larger than the mesh; the paper's section shape until the methods take the
+    others (issue 14: ``fxflex section`` analyses every shape)."""
+    g = scene.geometry
+    if not g.paper_shape:
+        key = ("geometry.stations" if g.stations else "geometry.wall" if g.wall
+               else "geometry.section")
+        raise SceneError(key, f"{method} runs on the paper's section only so far (a solid "
+                              f"rectangle, linear taper and twist); allowed: section = "
+                              f"\"rectangle\", wall = 0, no stations (fxflex section analyses "
+                              f"this blade)")
     if method in ("ffrf", "gcms", "tlf"):
         nx, ny, nz = scene.mesh.solid
         _twist_per_element(scene, "mesh.solid", nx, "divisions along X")

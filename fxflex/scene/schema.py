@@ -26,7 +26,8 @@ METHODS = ("ffrf", "gcms", "tlf", "lebb", "nebb", "ancf")
 PAPER_RPM = (1000.0, 5000.0, 10000.0)
 #: keys beyond the paper's scene (SPEC sections 9-10): in the scene hash only when not at their
 #: defaults (Scene.hash)
-LATER_KEYS = ("mesh.solid_degree", "mesh.beam_variant")
+LATER_KEYS = ("mesh.solid_degree", "mesh.beam_variant", "geometry.section", "geometry.airfoil",
+              "geometry.contour", "geometry.wall", "geometry.stations")
 PAPER_DAMPING = (100.0, 500.0, 1000.0)
 
 
@@ -39,9 +40,20 @@ class Geometry:
     tip_z: float = 0.04
     twist_deg: float = -45.0
     hub_radius: float = 0.0
+    #: SPEC section 9: the section's shape (fxflex.section), a hollow wall, a stations table
+    section: str = "rectangle"
+    airfoil: str = "0012"
+    contour: str = ""
+    wall: float = 0.0
+    stations: str = ""
 
     def __post_init__(self) -> None:
         check_section(self, "geometry")
+
+    @property
+    def paper_shape(self) -> bool:
+        """The paper's solid rectangle, tapered and twisted linearly (SPEC section 1)."""
+        return self.section == "rectangle" and self.wall == 0.0 and not self.stations
 
     def size_y(self, s):
         """Section size along Y~ at normalised position s = X~/L in [0, 1] (linear taper)."""

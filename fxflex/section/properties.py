@@ -1,7 +1,7 @@
 """Cross-section properties by a 2-D finite-element analysis in dolfinx (issue 14 item 3).
 
 Given an :class:`~fxflex.section.outline.Outline`, gmsh meshes the section (triangles, size
-``h`` = the larger extent / ``resolution``) and dolfinx computes, with P2 Lagrange elements:
+``h`` = the larger extent / ``resolution``, at most half a hollow section's wall) and dolfinx computes, with P2 Lagrange elements:
 
 - area A = int dA, centroid (y_c, z_c) = int (y, z) dA / A (in the outline's coordinates);
 - about the centroid, in the section's own axes: Iy = int z^2 dA, Iz = int y^2 dA,
@@ -31,7 +31,7 @@ import numpy as np
 
 from fxflex.section.outline import Outline
 
-__all__ = ["SectionResult", "RESOLUTION", "analyse", "analyse_many"]
+__all__ = ["SectionResult", "RESOLUTION", "analyse", "analyse_many", "triangles"]
 
 #: default section mesh: element size = largest extent / RESOLUTION
 RESOLUTION = 40
@@ -55,6 +55,17 @@ class SectionResult:
         d = asdict(self)
         d["centroid"], d["shear_centre"] = list(self.centroid), list(self.shear_centre)
         return d
+
+
+def element_size(outline: Outline, resolution: int) -> float:
+    """The larger extent / resolution, and at most half the thinnest wall of a hollow section
+    (two P2 elements across it)."""
+    h = max(outline.extent) / resolution
+    if outline.inner is not None:
+        from shapely.geometry import LinearRing
+
+        h = min(h, 0.5 * LinearRing(outline.outer).distance(LinearRing(outline.inner)))
+    return h
 
 
 def _mesh(gmsh, outline: Outline, h: float):
@@ -93,8 +104,7 @@ class _Solver:
         from scipy.sparse import bmat, csr_matrix
         from scipy.sparse.linalg import spsolve
 
-        h = max(outline.extent) / resolution
-        _mesh(self.gmsh, outline, h)
+        _mesh(self.gmsh, outline, element_size(outline, resolution))
         mesh, _, _ = gmshio.model_to_mesh(self.gmsh.model, MPI.COMM_SELF, 0, gdim=2)
         x = ufl.SpatialCoordinate(mesh)
         dx = ufl.dx(mesh, metadata={"quadrature_degree": 4})
@@ -146,6 +156,23 @@ def analyse_many(outlines, resolution: int = RESOLUTION) -> list[SectionResult]:
         return [solver.analyse(o, resolution) for o in outlines]
     finally:
         gmsh.finalize()
+
+
+def triangles(outline: Outline, resolution: int = RESOLUTION) -> tuple[np.ndarray, np.ndarray]:
+    """(points (n, 2), triangles (m, 3)) of the section mesh :func:`analyse` uses (for plots)."""
+    import gmsh
+
+    gmsh.initialize(readConfigFiles=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    try:
+        _mesh(gmsh, outline, element_size(outline, resolution))
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        _, _, nodes = gmsh.model.mesh.getElements(2)
+    finally:
+        gmsh.finalize()
+    index = np.empty(int(tags.max()) + 1, int)
+    index[tags.astype(int)] = np.arange(len(tags))
+    return coords.reshape(-1, 3)[:, :2].copy(), index[np.asarray(nodes[0], int)].reshape(-1, 3)
 
 
 def analyse(outline: Outline, resolution: int = RESOLUTION) -> SectionResult:
