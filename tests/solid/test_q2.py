@@ -122,7 +122,7 @@ def test_q2_lumped_mass_allows_a_longer_step_than_consistent():
     assert lumped < consistent
 
 
-# -- refusals, keys, counts -------------------------------------------------------------------------
+# -- refusals, keys, counts ------------------------------------------------------------------------
 def test_invariant_route_refuses_q2_in_one_line_with_its_memory():
     with pytest.raises(FxflexError) as err:
         tlf(force_eval="invariant").dynamics
@@ -141,7 +141,7 @@ def test_cache_keys_and_counts_carry_the_degree():
     assert estimate("tlf", q2).total > estimate("tlf", q1).total
 
 
-# -- MPI ----------------------------------------------------------------------------------------------
+# -- MPI -------------------------------------------------------------------------------------------
 @pytest.mark.mpi
 def test_q2_tlf_steady_parallel_matches_serial():
     s = scene("mesh.solid=[12,2,2]", Q2, "rotation.rpm=5000")
@@ -151,16 +151,16 @@ def test_q2_tlf_steady_parallel_matches_serial():
     assert math.isfinite(par[2])
 
 
-# -- the three integrators ----------------------------------------------------------------------------
+# -- the three integrators -------------------------------------------------------------------------
 #: tiny Q2 meshes of each solid method (FFRF, GCMS: 30 and 90 modes of a 2125-unknown mesh)
 TINY = {"ffrf": "mesh.solid=[8,2,2]", "gcms": "mesh.solid=[8,2,2]", "tlf": "mesh.solid=[6,2,2]"}
 
 
 @pytest.mark.parametrize("method", ["ffrf", "gcms", "tlf"])
 def test_q2_runs_with_ab2_cd_and_generalized_alpha_alike(method):
-    """The default scene's first 3 ms (the line load ramped in over 0.3 ms) on a tiny Q2 mesh, against the
-    paper's explicit run (FFRF, GCMS: AB2 at 0.5 / 0.3 us; TLF: CD at 0.5 us, lumped mass), as
-    max |U - U_ref| over the peak |U_ref|. Generalized-alpha at its default step stays within 1 %
+    """The default scene's first 3 ms (the line load ramped in over 0.3 ms) on a tiny Q2 mesh,
+    against the paper's explicit run (FFRF, GCMS: AB2 at 0.5 / 0.3 us; TLF: CD at 0.5 us,
+    lumped mass), as max |U - U_ref| over the peak |U_ref|. Generalized-alpha at its default step stays within 1 %
     (the criterion that chose the default step, docs/implicit.md). The other explicit scheme
     (CD at the paper's step; for TLF, AB2 at 0.1 us over the first 1 ms: AB2 amplifies an
     undamped mode by ~(w h)^4 / 4 per step, which at 0.2 us grows TLF's highest to 8.5 times
@@ -223,7 +223,7 @@ def test_q2_campbell_keeps_the_papers_verdicts():
     assert np.array_equal(modes_of(at, 3).frequencies_hz, tlf_data.modes[1].frequencies_hz)
 
 
-# -- root stress ------------------------------------------------------------------------------------
+# -- root stress -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("method", ["ffrf", "tlf"])
 def test_q2_root_stress_agrees_with_q1_to_q1s_discretisation_error(method):
     """The largest and smallest root sigma_X (the four values of ``root_stress``) of the steady
@@ -245,7 +245,7 @@ def test_q2_root_stress_agrees_with_q1_to_q1s_discretisation_error(method):
     assert 0.0 < gap <= change
 
 
-# -- fields, checkpoints (the command line) ---------------------------------------------------------
+# -- fields, checkpoints (the command line) --------------------------------------------------------
 FXFLEX = [sys.executable, "-m", "fxflex"]
 TLF_RUN = ["run", "--method", "tlf", "--set", "mesh.solid=[4,2,2]", "--set", Q2, "--dt", "1e-6"]
 
@@ -315,7 +315,7 @@ def test_q2_run_resumed_from_a_checkpoint_writes_the_same_series(tmp_path):
     assert (tmp_path / "a.csv").read_bytes() == series and series.count(b"\n") > 100
 
 
-# -- two ranks against one --------------------------------------------------------------------------
+# -- two ranks against one -------------------------------------------------------------------------
 @pytest.mark.mpi
 @pytest.mark.parametrize("method", ["ffrf", "gcms", "tlf"])
 def test_q2_steady_on_two_ranks_equals_serial(method, distributed_rtol):
