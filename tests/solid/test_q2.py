@@ -160,8 +160,8 @@ TINY = {"ffrf": "mesh.solid=[8,2,2]", "gcms": "mesh.solid=[8,2,2]", "tlf": "mesh
 def test_q2_runs_with_ab2_cd_and_generalized_alpha_alike(method):
     """The default scene's first 3 ms (the line load ramped in over 0.3 ms) on a tiny Q2 mesh,
     against the paper's explicit run (FFRF, GCMS: AB2 at 0.5 / 0.3 us; TLF: CD at 0.5 us,
-    lumped mass), as max |U - U_ref| over the peak |U_ref|. Generalized-alpha at its default step stays within 1 %
-    (the criterion that chose the default step, docs/implicit.md). The other explicit scheme
+    lumped mass), as max |U - U_ref| over the peak |U_ref|. Generalized-alpha at its default step
+    stays within 1 % (the criterion that chose the default step, docs/implicit.md). The other explicit scheme
     (CD at the paper's step; for TLF, AB2 at 0.1 us over the first 1 ms: AB2 amplifies an
     undamped mode by ~(w h)^4 / 4 per step, which at 0.2 us grows TLF's highest to 8.5 times
     the peak by 3 ms) is second order like the reference at a step ~1e-4 of the lowest
