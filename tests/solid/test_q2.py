@@ -159,14 +159,14 @@ TINY = {"ffrf": "mesh.solid=[8,2,2]", "gcms": "mesh.solid=[8,2,2]", "tlf": "mesh
 @pytest.mark.parametrize("method", ["ffrf", "gcms", "tlf"])
 def test_q2_runs_with_ab2_cd_and_generalized_alpha_alike(method):
     """The default scene's first 3 ms (the line load ramped in over 0.3 ms) on a tiny Q2 mesh,
-    against the paper's explicit run (FFRF, GCMS: AB2 at 0.5 / 0.3 us; TLF: CD at 0.5 us,
-    lumped mass), as max |U - U_ref| over the peak |U_ref|. Generalized-alpha at its default step
-    stays within 1 % (the criterion that chose the default step, docs/implicit.md). The other explicit scheme
-    (CD at the paper's step; for TLF, AB2 at 0.1 us over the first 1 ms: AB2 amplifies an
-    undamped mode by ~(w h)^4 / 4 per step, which at 0.2 us grows TLF's highest to 8.5 times
-    the peak by 3 ms) is second order like the reference at a step ~1e-4 of the lowest
-    period, so the two differ by ~(w1 h)^2 of the peak, far below the bound 1e-3 (measured
-    2e-5 / 1e-5 CD for FFRF / GCMS, 1e-6 TLF AB2)."""
+    against the paper's explicit run (FFRF, GCMS: AB2 at 0.5 / 0.3 us; TLF: CD at 0.5 us, lumped
+    mass), as max |U - U_ref| over the peak |U_ref|. Generalized-alpha at its default step stays
+    within 1 % (the criterion that chose the default step, docs/implicit.md). The other explicit
+    scheme (CD at the paper's step; for TLF, AB2 at 0.1 us over the first 1 ms: AB2 amplifies an
+    undamped mode by ~(w h)^4 / 4 per step, which at 0.2 us grows TLF's highest to 8.5 times the
+    peak by 3 ms) is second order like the reference at a step ~1e-4 of the lowest period, so the
+    two differ by ~(w1 h)^2 of the peak, far below the bound 1e-3 (measured 2e-5 / 1e-5 CD for FFRF
+    / GCMS, 1e-6 TLF AB2)."""
     form = build(method, scene(TINY[method], Q2), COMM, BuildOptions(need_steady=False))
     t_end = 3e-3
     ref = reference(form, t_end)
