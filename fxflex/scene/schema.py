@@ -176,17 +176,24 @@ class Scene:
         """The full resolved scene as plain JSON-able data (tuples become lists)."""
         return json.loads(json.dumps(dataclasses.asdict(self)))
 
-    @property
-    def hash(self) -> str:
-        """Stable 16-hex-digit hash of the resolved scene (keys sorted, floats as repr). The keys
-        of SPEC sections 9-10 (:data:`LATER_KEYS`) count only when not at their defaults, so a
-        scene of sections 1-8 keeps the hash it had before they existed (checkpoints resume)."""
+    def stable_dict(self) -> dict:
+        """:meth:`to_dict` without the keys of SPEC sections 9-10 (:data:`LATER_KEYS`) that are
+        at their defaults: what a hash of a scene of sections 1-8 was computed from before those
+        keys existed, so such hashes (checkpoints, the stored reference) keep their value."""
         data = self.to_dict()
         for key in LATER_KEYS:
             sec, name = key.split(".")
             defaults = {f.name: f.default for f in dataclasses.fields(getattr(self, sec))}
             if data[sec][name] == defaults[name]:
                 del data[sec][name]
+        return data
+
+    @property
+    def hash(self) -> str:
+        """Stable 16-hex-digit hash of the resolved scene (keys sorted, floats as repr) over
+        :meth:`stable_dict`, so a scene of sections 1-8 keeps the hash it had before sections
+        9-10 existed (checkpoints resume)."""
+        data = self.stable_dict()
         text = json.dumps(data, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
