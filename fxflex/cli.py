@@ -40,7 +40,7 @@ EXIT_INPUT, EXIT_FAILURE, EXIT_INTERRUPT = 2, 1, 130
 
 
 BENCHES = ("steady", "tlf", "reduced", "beams", "paper", "accuracy", "stability", "skip",
-           "implicit")
+           "implicit", "convergence")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -651,7 +651,7 @@ def cmd_modes(args, comm) -> None:
 
 
 #: ``fxflex bench NAME`` modules not named NAME (one per name across the package)
-BENCH_MODULES = {"tlf": "tlf_speed"}
+BENCH_MODULES = {"tlf": "tlf_speed", "convergence": "refinement"}
 
 
 def cmd_bench(args, comm) -> None:

@@ -8,6 +8,10 @@ Studies, in the order they run (each writes its files into the output folder as 
    smallest axial stress at the root section (``root_stress``: section forces spread over the
    corners) and the drive torque at the equilibrium. Per-step costs are probed here and the
    run-time estimate printed.
+1b. **Accurate solids** (when the scene's solids are the paper's Q1): the equilibria of the solid
+   methods again with Q2 elements on a coarser mesh (``ACCURATE_SOLIDS``, a third of the
+   unknowns) and the SPEC section 7 rows built from equilibria recomputed with them: a row that
+   fails with Q1 and passes with Q2 fails because of the Q1 mesh's locking (issue 13 item 5).
 2. **Damping study, equilibria** (Sect. 4.3): every method at 1000 and 10000 rpm, c1..c3, relative
    and absolute damping models.
 3. **Transients at paper settings** (Fig. 4, 6, 7): each method with its paper integrator and step
@@ -52,12 +56,14 @@ from fxflex.analysis import compare_figures as figures
 from fxflex.analysis.compare_cache import FormCache
 from fxflex.analysis.compare_output import transient_row, write_csv, write_results
 from fxflex.analysis.compare_paper import paper_rows
-from fxflex.analysis.compare_plan import (C3, DAMPING_RPM, GROWTH_LIMIT, PAPER_WINDOW,
-                                          SAMPLE_DT, TLF_WINDOWS, SteadyRow, plan, steady_time)
+from fxflex.analysis.compare_plan import (ACCURATE_SOLIDS, C3, DAMPING_RPM, GROWTH_LIMIT,
+                                          PAPER_WINDOW, SAMPLE_DT, TLF_WINDOWS, SteadyRow, plan,
+                                          steady_time)
 from fxflex.analysis.transient import Case, CaseResult, run_case, summarise
 from fxflex.errors import FxflexError
 from fxflex.formulation import PAPER_INTEGRATION, BuildOptions, build
 from fxflex.io.payload import envelope
+from fxflex.methods import formulation_class
 from fxflex.scene import METHODS, PAPER_DAMPING, PAPER_RPM, Scene
 
 __all__ = ["SteadyRow", "paper_rows", "run_compare", "plan", "steady_time", "PAPER_WINDOW",
@@ -73,7 +79,8 @@ class Compare:
     """Runs the studies of the module docstring and writes their files (rank 0)."""
 
     def __init__(self, scene: Scene, methods, out_dir: str | None, comm, *, full: bool = False,
-                 say=None, paper_window: float = PAPER_WINDOW, tlf_windows: dict | None = None):
+                 say=None, paper_window: float = PAPER_WINDOW, tlf_windows: dict | None = None,
+                 accurate: dict | None = None):
         self.base = scene.replace(**{"rotation.profile": "constant"})
         self.paper_window, self.tlf_windows = paper_window, tlf_windows or TLF_WINDOWS
         self.methods = [m for m in METHODS if m in methods]
@@ -82,6 +89,8 @@ class Compare:
         self._say = say
         self.forms = FormCache(self.base, comm)
         self.steady: list[SteadyRow] = []
+        self.accurate_keys = ACCURATE_SOLIDS if accurate is None else accurate
+        self.accurate: list[SteadyRow] = []     # study 1b: the solids' equilibria with Q2
         self.damping: list[SteadyRow] = []
         self.results: dict = {}             # Case.key -> CaseResult
         self.summaries: dict = {}           # (study, Case.key) -> summary dict
@@ -166,6 +175,53 @@ class Compare:
                 self._write_csv("steady.csv", [r.as_dict() for r in self.steady])
             self.probe(m)
         self.timings["steady"] = time.perf_counter() - t0
+        self.run_accurate_solids()
+
+    def solids(self) -> list[str]:
+        return [m for m in self.methods if formulation_class(m).mesh_key == "mesh.solid"]
+
+    def run_accurate_solids(self) -> None:
+        """Study 1b (module docstring): the solid methods' equilibria with Q2 elements, when the
+        scene's are Q1 (a Q2 scene's rows are already the accurate ones)."""
+        if self.base.mesh.solid_degree != 1 or not self.solids() or not self.accurate_keys:
+            return
+        from fxflex.solid.model import solid_dof_count
+
+        keys = self.accurate_keys
+        self.say(f"[1b] accurate solids: equilibria with Q{keys['mesh.solid_degree']} on "
+                 f"{list(keys['mesh.solid'])}, against which the Q1 mesh's rows are read")
+        t0 = time.perf_counter()
+        for m in self.solids():
+            for rpm in PAPER_RPM:
+                t1 = time.perf_counter()
+                form = build(m, self.scene_for(rpm).replace(**keys), self.comm)
+                st = form.steady_state()
+                row = SteadyRow(method=m, rpm=float(rpm), tip_m=np.asarray(st.tip, float),
+                                stable=None, converged=bool(st.converged),
+                                dof=solid_dof_count(form.scene),
+                                seconds=time.perf_counter() - t1)
+                self.accurate.append(row)
+                self._log_steady(row)
+                del form
+        self._write_csv("accurate_steady.csv", [r.as_dict() for r in self.accurate])
+        self.timings["accurate_solids"] = time.perf_counter() - t0
+
+    def accurate_rows(self) -> list[dict]:
+        """The SPEC section 7 rows that equilibria decide, with the solids' equilibria from
+        study 1b, each next to the same row of the scene's own mesh."""
+        if not self.accurate:
+            return []
+        solids = {r.method for r in self.accurate}
+        rows = [r for r in self.steady if r.method not in solids] + self.accurate
+        own = {f["figure"]: f for f in paper_rows(self.steady)}
+        out = []
+        for f in paper_rows(rows):
+            base = own.get(f["figure"])
+            if base is None or (base["ours"] == f["ours"]):
+                continue                    # a row without a solid in it
+            out.append({**f, "q1_ours": base["ours"], "q1_pass": base["pass"],
+                        "locking": bool(base["pass"] is False and f["pass"] is True)})
+        return out
 
     def _log_steady(self, row: SteadyRow) -> None:
         t = 1e3 * row.tip_m
@@ -341,6 +397,10 @@ class Compare:
                             "tlf_s": None if self.full else self.tlf_windows,
                             "sample_dt_s": SAMPLE_DT},
                 "steady": [r.as_dict() for r in self.steady],
+                "accurate_solids": {"keys": {k: (list(v) if isinstance(v, tuple) else v)
+                                             for k, v in self.accurate_keys.items()},
+                                    "steady": [r.as_dict() for r in self.accurate],
+                                    "paper": self.accurate_rows()} if self.accurate else None,
                 "damping_steady": [r.as_dict() for r in self.damping],
                 "transients": [{"study": st, **s} for (st, _), s in self.summaries.items()],
                 "efficiency": self.efficiency, "paper": figures, "estimate": self.estimate,
@@ -391,5 +451,6 @@ def _cpu(fn, *args, **kw) -> float:
 def run_compare(scene: Scene, methods, out_dir: str | None, comm, progress=None, *,
                 full: bool = False, **windows) -> dict:
     """The whole study (module docstring); ``progress(text)`` receives progress lines;
-    ``windows``: ``paper_window`` and ``tlf_windows`` to shorten the runs (tests)."""
+    ``windows``: ``paper_window`` and ``tlf_windows`` to shorten the runs, ``accurate`` the scene
+    keys of study 1b ({} to skip it) (tests)."""
     return Compare(scene, methods, out_dir, comm, full=full, say=progress, **windows).run()

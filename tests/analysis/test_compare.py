@@ -14,6 +14,8 @@ from fxflex.io.series import read_series
 from fxflex.scene import METHODS, PAPER_DAMPING, PAPER_RPM, load_scene
 
 COARSE = ["mesh.solid=[10,2,2]", "mesh.beam_elements=4"]
+#: study 1b's accurate solids, small for the test
+ACCURATE = {"mesh.solid_degree": 2, "mesh.solid": (8, 2, 2)}
 #: every SPEC section 7 figure the report must carry when all six methods run (by label start)
 SPEC7 = ["LEBB vs FFRF, longitudinal", "LEBB vs FFRF, orthogonal", "LEBB vs FFRF, load",
          "GCMS vs FFRF, longitudinal", "GCMS vs FFRF, orthogonal", "GCMS vs FFRF, load",
@@ -47,7 +49,8 @@ def study(tmp_path_factory):
     lines = []
     res = run_compare(load_scene(overrides=COARSE), list(METHODS), str(out), MPI.COMM_WORLD,
                       progress=lines.append, paper_window=4e-4,
-                      tlf_windows={"speeds": 2e-4, "steps": 1e-4, "damping": 1e-4})
+                      tlf_windows={"speeds": 2e-4, "steps": 1e-4, "damping": 1e-4},
+                      accurate=ACCURATE)
     return res, out, lines
 
 
@@ -190,3 +193,37 @@ def test_quadratic_solids_compare_without_the_refused_invariant_route(tmp_path):
     assert any(row["figure"].startswith("Sect. 4.2: NEBB") for row in res["paper"])
     assert "not measured: --force-eval invariant" in (tmp_path / "report.md").read_text()
     assert any(line.startswith("  tlf: not measured") for line in lines)
+
+
+@pytest.mark.serial
+def test_accurate_solids_read_the_q1_rows(study):
+    """Study 1b (issue 13 item 5): the solids' equilibria again with Q2, and every SPEC row
+    decided by equilibria that has a solid in it, with the Q1 figure beside the Q2 one; a row
+    is read as the Q1 mesh's locking exactly when it fails with Q1 and passes with Q2."""
+    res, out, lines = study
+    acc = res["accurate_solids"]
+    assert acc["keys"] == {"mesh.solid_degree": 2, "mesh.solid": [8, 2, 2]}
+    assert sorted({(s["method"], s["rpm"]) for s in acc["steady"]}) == sorted(
+        (m, rpm) for m in ("ffrf", "gcms", "tlf") for rpm in PAPER_RPM)
+    own = {f["figure"]: f for f in res["paper"]}
+    labels = {f["figure"] for f in acc["paper"]}
+    assert "LEBB vs FFRF, orthogonal, Omega1 (|diff| %)" in labels
+    assert "Omega1: TLF orthogonal smaller than FFRF (%)" in labels
+    assert not any(label.startswith(("Relative model", "Sect. 4.2")) for label in labels)
+    for f in acc["paper"]:
+        assert f["q1_ours"] == own[f["figure"]]["ours"] and f["ours"] != f["q1_ours"]
+        assert f["locking"] == (f["q1_pass"] is False and f["pass"] is True)
+    # closer to the converged reference of each one's continuum than the coarse Q1 mesh's
+    from fxflex.analysis.reference import relative_error, stored_reference
+    from fxflex.bench.accuracy import OWN_THEORY
+
+    ref = stored_reference(load_scene())["theories"]
+    steady = {(s["method"], s["rpm"]): s for s in res["steady"]}
+    for s in acc["steady"]:
+        exact = 1e3 * np.array(ref[OWN_THEORY[s["method"]]][f"{s['rpm']:g}"]["reference_m"])
+        q1 = np.array(steady[(s["method"], s["rpm"])]["tip_mm"])
+        assert relative_error(s["tip_mm"], exact) < 0.5 * relative_error(q1, exact)
+    report = (out / "report.md").read_text()
+    assert "## 2b. The rows decided by equilibria, with accurate solids" in report
+    assert any(line.startswith("[1b] accurate solids") for line in lines)
+    assert (out / "accurate_steady.csv").exists()
