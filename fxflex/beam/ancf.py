@@ -26,9 +26,11 @@ import time
 
 import numpy as np
 
-from fxflex.beam.ancf_elements import (DPN, QUADRATURE, SLOTS, assemble_blocks, elastic_tensors,
-                                       elasticity_matrix, line_load, prism_quadrature,
-                                       reference_coordinates, reference_gradients, scalar_mass)
+from fxflex.beam.ancf_elements import (DPN, QUADRATURE, SLOTS, assemble_blocks, cartesian_pairs,
+                                       centerline_pairs, elastic_tensors, elasticity_matrix,
+                                       gram_tensors, line_load, linear_from_pairs,
+                                       prism_quadrature, reference_coordinates,
+                                       reference_gradients, reference_jacobian, scalar_mass)
 from fxflex.beam.elements import ancf_tables
 from fxflex.beam.invariants import GramChain
 from fxflex.beam.line import beam_line, twist_check
@@ -82,12 +84,15 @@ class ANCF(FormulationBase):
         tab = self.tab = ancf_tables(X, Y, Z, le)
         self.detJ, nx = reference_gradients(self.e0n, tab)
         dV = self.detJ * wq
+        self.quad = {"nx": nx, "dV": dV}                               # for checks
         C = self.C = elasticity_matrix(scene)
-        self.KLe, T1, T4 = elastic_tensors(C, nx, dV)
+        if scene.mesh.beam_variant == "paper":
+            self.KLe, T1, T4 = elastic_tensors(C, nx, dV)
+        else:
+            self.KLe, T1, T4 = gram_tensors(C, *self._centerline_strain(X, Y, Z, le), dV)
         emap = np.arange(2 * DPN).reshape(2 * SLOTS, 3)
         self.engine = GramChain(T1, T4, dpn=DPN, spn=SLOTS, emap=emap, esign=np.ones(emap.shape),
                                 system=self.force_eval == "invariant")
-        self.quad = {"nx": nx, "dV": dV}                               # for checks
         # linear stiffness and scalar mass (Eq. 54: M = Ms x I_3), assembled
         KL = assemble_blocks(self.KLe, DPN, self.n_full)
         Ms = assemble_blocks(scalar_mass(rho, dV, tab.N), SLOTS, self.n_slots)
@@ -131,6 +136,16 @@ class ANCF(FormulationBase):
         self._rotate(0.0)
         self._steady: SteadyState | None = None
         self._omega_max: float | None = None
+
+    def _centerline_strain(self, X, Y, Z, le) -> tuple[np.ndarray, np.ndarray]:
+        """(B_L, w) of the locking-free variant's strain (centerline curvature, tied shears):
+        :func:`fxflex.beam.ancf_elements.centerline_pairs` turned to the reference axes."""
+        e0n = self.e0n
+        J = reference_jacobian(e0n, self.tab)
+        W = cartesian_pairs(centerline_pairs(self.tab, X, Y, Z, le), np.linalg.inv(J))
+        e0e = np.stack([e0n[:-1], e0n[1:]], axis=1).reshape(len(e0n) - 1, 2 * SLOTS, 3)
+        self.quad["pairs"] = W
+        return linear_from_pairs(W, e0e), W
 
     # ------------------------------------------------------------------ drive
     def _rotate(self, phi: float) -> np.ndarray:
