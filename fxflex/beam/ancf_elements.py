@@ -142,9 +142,9 @@ CENTERLINE, SECTION_Y, SECTION_Z = (0, 1, SLOTS, SLOTS + 1), (2, SLOTS + 2), (3,
 def centerline_pairs(tab: AncfTables, X: np.ndarray, Y: np.ndarray, Z: np.ndarray, le: float
                      ) -> np.ndarray:
     """Wt (nq, 3, 3, 2 SLOTS, 2 SLOTS): the covariant Green strain of the locking-free variant,
-    E~_ij = 1/2 sum_ab Wt_ij,ab (e_a . e_b - e0_a . e0_b) on the prism coordinates X~ (docs/beams.md,
-    "Locking-free variants"). It is the continuum's 1/2 (g_i . g_j - G_i . G_j), g_i = dr/dX~_i,
-    with the terms of the centerline r (cubic) and the section gradients r_Y, r_Z (linear in X~)
+    E~_ij = 1/2 sum_ab Wt_ij,ab (e_a . e_b - e0_a . e0_b) on the prism coordinates X~
+    (docs/beams.md, "Locking-free variants"). It is the continuum's 1/2 (g_i . g_j - G_i . G_j),
+    g_i = dr/dX~_i, with the terms of the centerline r (cubic) and the section gradients r_Y, r_Z (linear in X~)
     changed, each still a combination of Gram entries of the slots:
 
     - tied transverse shears: gamma_Y = r' . r_Y and gamma_Z = r' . r_Z in g_X . g_Y and
@@ -200,7 +200,8 @@ def reference_jacobian(e0n: np.ndarray, tab: AncfTables) -> np.ndarray:
 
 
 def scalar_mass(rho: float, dV: np.ndarray, N: np.ndarray) -> np.ndarray:
-    """M_s^e = int rho N_a N_b dV per element (Eq. 54, M = M_s (x) I_3): (n_el, 2 SLOTS, 2 SLOTS)."""
+    """M_s^e = int rho N_a N_b dV per element (Eq. 54, M = M_s (x) I_3):
+    (n_el, 2 SLOTS, 2 SLOTS)."""
     n_el, nq = dV.shape[0], N.shape[0]
     return rho * np.einsum("eq,qa,qb->eab", np.broadcast_to(dV, (n_el, nq)), N, N)
 
