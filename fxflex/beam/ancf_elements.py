@@ -144,8 +144,8 @@ def centerline_pairs(tab: AncfTables, X: np.ndarray, Y: np.ndarray, Z: np.ndarra
     """Wt (nq, 3, 3, 2 SLOTS, 2 SLOTS): the covariant Green strain of the locking-free variant,
     E~_ij = 1/2 sum_ab Wt_ij,ab (e_a . e_b - e0_a . e0_b) on the prism coordinates X~
     (docs/beams.md, "Locking-free variants"). It is the continuum's 1/2 (g_i . g_j - G_i . G_j),
-    g_i = dr/dX~_i, with the terms of the centerline r (cubic) and the section gradients r_Y, r_Z (linear in X~)
-    changed, each still a combination of Gram entries of the slots:
+    g_i = dr/dX~_i, with the terms of the centerline r (cubic) and the section gradients r_Y, r_Z
+    (linear in X~) changed, each still a combination of Gram entries of the slots:
 
     - tied transverse shears: gamma_Y = r' . r_Y and gamma_Z = r' . r_Z in g_X . g_Y and
       g_X . g_Z, r' quadratic against a linear r_Y, r_Z (a mismatch that locks), become their

@@ -139,7 +139,8 @@ def centerline_energy(form, e):
     section gradients r_Y, r_Z (node slots n = 0, 1), r' . r_Y replaced by the tied shear
     t_Y = sum_n L_n dr/dX~_n . dr/dY~_n in g_X . g_Y and 2 Y~ r' . r_Y' by
     2 Y~ (t_Y' - r'' . r_Y) in g_X . g_X (the same in Z~); E~ = (m(e) - m(e0)) / 2 turned to
-    the reference axes by J^-1, energy 1/2 int eps . C eps dV. Works on complex e (complex-step derivatives)."""
+    the reference axes by J^-1, energy 1/2 int eps . C eps dV. Works on complex e (complex-step
+    derivatives)."""
     from fxflex.beam.ancf_elements import prism_quadrature, reference_jacobian
     from fxflex.beam.elements import hermite, linear
 
