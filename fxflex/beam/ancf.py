@@ -11,7 +11,9 @@ Between nodes the linear interpolation of the section gradients is the chord of 
 0.08 % shrink of the section at mid-element with 10 elements).
 
 Green-Lagrange strain on u = N (e - e0) (Eq. 53), St.Venant-Kirchhoff material, 5 x 3 x 3 Gauss
-points per element; elastic force by the invariant tensors of :mod:`fxflex.beam.invariants` (Eq. 55,
+points per element (``mesh.beam_variant = "locking-free"``: uncoupled normal strains, the bending
+curvature from the centerline and tied transverse shears, still a Gram form of the slots:
+:func:`fxflex.beam.ancf_elements.centerline_pairs`, docs/beams.md "Locking-free variants"); elastic force by the invariant tensors of :mod:`fxflex.beam.invariants` (Eq. 55,
 57): ``force_eval = "invariant"`` (system invariant matrices) or ``"element"`` (element invariant
 matrices, ref. [49]). Mass Eq. 54 (constant), damping Eq. 56 (relative: c/rho M (e' - phi' S e),
 because e_r = A e0 moves rigidly) or Eq. 69 (absolute: c/rho M (e' - e_r')), external load on the

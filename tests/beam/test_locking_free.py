@@ -1,5 +1,6 @@
 """mesh.beam_variant = "locking-free" (issue 13, docs/beams.md "Locking-free variants"): NEBB with
-the element-mean membrane strain, ANCF with the Poisson coupling of the normal strains removed.
+the element-mean membrane strain, ANCF with uncoupled normal strains, the bending curvature of
+the centerline and tied transverse shears.
 The forces are the gradients of their energies by every evaluation route, and on the issue's
 slender beams they converge where the paper's elements lock; the paper variants are untouched."""
 
