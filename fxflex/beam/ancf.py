@@ -13,8 +13,9 @@ Between nodes the linear interpolation of the section gradients is the chord of 
 Green-Lagrange strain on u = N (e - e0) (Eq. 53), St.Venant-Kirchhoff material, 5 x 3 x 3 Gauss
 points per element (``mesh.beam_variant = "locking-free"``: uncoupled normal strains, the bending
 curvature from the centerline and tied transverse shears, still a Gram form of the slots:
-:func:`fxflex.beam.ancf_elements.centerline_pairs`, docs/beams.md "Locking-free variants"); elastic force by the invariant tensors of :mod:`fxflex.beam.invariants` (Eq. 55,
-57): ``force_eval = "invariant"`` (system invariant matrices) or ``"element"`` (element invariant
+:func:`fxflex.beam.ancf_elements.centerline_strain`, docs/beams.md "Locking-free variants");
+elastic force by the invariant tensors of :mod:`fxflex.beam.invariants` (Eq. 55, 57):
+``force_eval = "invariant"`` (system invariant matrices) or ``"element"`` (element invariant
 matrices, ref. [49]). Mass Eq. 54 (constant), damping Eq. 56 (relative: c/rho M (e' - phi' S e),
 because e_r = A e0 moves rigidly) or Eq. 69 (absolute: c/rho M (e' - e_r')), external load on the
 centerline. The root node follows the drive: its coordinates are A(phi(t)) e0, except dr/dX~,
@@ -28,11 +29,10 @@ import time
 
 import numpy as np
 
-from fxflex.beam.ancf_elements import (DPN, QUADRATURE, SLOTS, assemble_blocks, cartesian_pairs,
-                                       centerline_pairs, elastic_tensors, elasticity_matrix,
-                                       gram_tensors, line_load, linear_from_pairs,
-                                       prism_quadrature, reference_coordinates,
-                                       reference_gradients, reference_jacobian, scalar_mass)
+from fxflex.beam.ancf_elements import (DPN, QUADRATURE, SLOTS, assemble_blocks,
+                                       centerline_strain, elastic_tensors, elasticity_matrix,
+                                       gram_tensors, line_load, prism_quadrature,
+                                       reference_coordinates, reference_gradients, scalar_mass)
 from fxflex.beam.elements import ancf_tables
 from fxflex.beam.invariants import GramChain
 from fxflex.beam.line import beam_line, twist_check
@@ -91,7 +91,8 @@ class ANCF(FormulationBase):
         if scene.mesh.beam_variant == "paper":
             self.KLe, T1, T4 = elastic_tensors(C, nx, dV)
         else:
-            self.KLe, T1, T4 = gram_tensors(C, *self._centerline_strain(X, Y, Z, le), dV)
+            BL, W = centerline_strain(self.e0n, tab, X, Y, Z, le)
+            self.KLe, T1, T4 = gram_tensors(C, BL, W, dV)
         emap = np.arange(2 * DPN).reshape(2 * SLOTS, 3)
         self.engine = GramChain(T1, T4, dpn=DPN, spn=SLOTS, emap=emap, esign=np.ones(emap.shape),
                                 system=self.force_eval == "invariant")
@@ -138,16 +139,6 @@ class ANCF(FormulationBase):
         self._rotate(0.0)
         self._steady: SteadyState | None = None
         self._omega_max: float | None = None
-
-    def _centerline_strain(self, X, Y, Z, le) -> tuple[np.ndarray, np.ndarray]:
-        """(B_L, w) of the locking-free variant's strain (centerline curvature, tied shears):
-        :func:`fxflex.beam.ancf_elements.centerline_pairs` turned to the reference axes."""
-        e0n = self.e0n
-        J = reference_jacobian(e0n, self.tab)
-        W = cartesian_pairs(centerline_pairs(self.tab, X, Y, Z, le), np.linalg.inv(J))
-        e0e = np.stack([e0n[:-1], e0n[1:]], axis=1).reshape(len(e0n) - 1, 2 * SLOTS, 3)
-        self.quad["pairs"] = W
-        return linear_from_pairs(W, e0e), W
 
     # ------------------------------------------------------------------ drive
     def _rotate(self, phi: float) -> np.ndarray:

@@ -17,7 +17,8 @@ from fxflex.scene import Scene
 
 __all__ = ["QUADRATURE", "SLOTS", "DPN", "elasticity_matrix", "reference_coordinates",
            "voigt_linear", "voigt_pairs", "prism_quadrature", "reference_gradients",
-           "elastic_tensors", "centerline_pairs", "cartesian_pairs", "linear_from_pairs",
+           "elastic_tensors", "centerline_strain", "centerline_pairs", "cartesian_pairs",
+           "linear_from_pairs",
            "gram_tensors", "reference_jacobian", "scalar_mass", "assemble_blocks", "line_load"]
 
 #: Gauss points per element: along X~, Y~, Z~ (the paper's 5 x 3 x 3)
@@ -139,6 +140,17 @@ def gram_tensors(C: np.ndarray, BL: np.ndarray, W: np.ndarray, dV: np.ndarray
 CENTERLINE, SECTION_Y, SECTION_Z = (0, 1, SLOTS, SLOTS + 1), (2, SLOTS + 2), (3, SLOTS + 3)
 
 
+def centerline_strain(e0n: np.ndarray, tab: AncfTables, X: np.ndarray, Y: np.ndarray,
+                      Z: np.ndarray, le: float) -> tuple[np.ndarray, np.ndarray]:
+    """(B_L, w) per element and Gauss point of the locking-free variant's strain (centerline
+    curvature, tied shears), for :func:`gram_tensors`: :func:`centerline_pairs` turned to the
+    reference axes by :func:`cartesian_pairs`, linearised at e0 by :func:`linear_from_pairs`."""
+    W = cartesian_pairs(centerline_pairs(tab, X, Y, Z, le),
+                        np.linalg.inv(reference_jacobian(e0n, tab)))
+    e0e = np.stack([e0n[:-1], e0n[1:]], axis=1).reshape(len(e0n) - 1, 2 * SLOTS, 3)
+    return linear_from_pairs(W, e0e), W
+
+
 def centerline_pairs(tab: AncfTables, X: np.ndarray, Y: np.ndarray, Z: np.ndarray, le: float
                      ) -> np.ndarray:
     """Wt (nq, 3, 3, 2 SLOTS, 2 SLOTS): the covariant Green strain of the locking-free variant,
@@ -166,7 +178,7 @@ def centerline_pairs(tab: AncfTables, X: np.ndarray, Y: np.ndarray, Z: np.ndarra
     for j, g, section in ((1, Y, SECTION_Y), (2, Z, SECTION_Z)):
         for n, s in enumerate(section):
             for m, c in enumerate(CENTERLINE):
-                own = m == 2 * n + 1                     # the pair (dr/dX~, dr/dY~) of node n
+                own = m == 2 * n + 1          # the pair (dr/dX~, section gradient) of node n
                 Wt[:, 0, 0, c, s] = Wt[:, 0, 0, s, c] = g * (own * dL[:, n] - H2[:, m] * L[:, n])
                 tied = 0.5 * L[:, n] if own else 0.0
                 for i, k in ((0, j), (j, 0)):
