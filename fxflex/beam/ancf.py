@@ -11,8 +11,11 @@ Between nodes the linear interpolation of the section gradients is the chord of 
 0.08 % shrink of the section at mid-element with 10 elements).
 
 Green-Lagrange strain on u = N (e - e0) (Eq. 53), St.Venant-Kirchhoff material, 5 x 3 x 3 Gauss
-points per element; elastic force by the invariant tensors of :mod:`fxflex.beam.invariants` (Eq. 55,
-57): ``force_eval = "invariant"`` (system invariant matrices) or ``"element"`` (element invariant
+points per element (``mesh.beam_variant = "locking-free"``: uncoupled normal strains, the bending
+curvature from the centerline and tied transverse shears, still a Gram form of the slots:
+:func:`fxflex.beam.ancf_elements.centerline_strain`, docs/beams.md "Locking-free variants");
+elastic force by the invariant tensors of :mod:`fxflex.beam.invariants` (Eq. 55, 57):
+``force_eval = "invariant"`` (system invariant matrices) or ``"element"`` (element invariant
 matrices, ref. [49]). Mass Eq. 54 (constant), damping Eq. 56 (relative: c/rho M (e' - phi' S e),
 because e_r = A e0 moves rigidly) or Eq. 69 (absolute: c/rho M (e' - e_r')), external load on the
 centerline. The root node follows the drive: its coordinates are A(phi(t)) e0, except dr/dX~,
@@ -26,8 +29,9 @@ import time
 
 import numpy as np
 
-from fxflex.beam.ancf_elements import (DPN, QUADRATURE, SLOTS, assemble_blocks, elastic_tensors,
-                                       elasticity_matrix, line_load, prism_quadrature,
+from fxflex.beam.ancf_elements import (DPN, QUADRATURE, SLOTS, assemble_blocks,
+                                       centerline_strain, elastic_tensors, elasticity_matrix,
+                                       gram_tensors, line_load, prism_quadrature,
                                        reference_coordinates, reference_gradients, scalar_mass)
 from fxflex.beam.elements import ancf_tables
 from fxflex.beam.invariants import GramChain
@@ -82,12 +86,16 @@ class ANCF(FormulationBase):
         tab = self.tab = ancf_tables(X, Y, Z, le)
         self.detJ, nx = reference_gradients(self.e0n, tab)
         dV = self.detJ * wq
+        self.quad = {"nx": nx, "dV": dV}                               # for checks
         C = self.C = elasticity_matrix(scene)
-        self.KLe, T1, T4 = elastic_tensors(C, nx, dV)
+        if scene.mesh.beam_variant == "paper":
+            self.KLe, T1, T4 = elastic_tensors(C, nx, dV)
+        else:
+            BL, W = centerline_strain(self.e0n, tab, X, Y, Z, le)
+            self.KLe, T1, T4 = gram_tensors(C, BL, W, dV)
         emap = np.arange(2 * DPN).reshape(2 * SLOTS, 3)
         self.engine = GramChain(T1, T4, dpn=DPN, spn=SLOTS, emap=emap, esign=np.ones(emap.shape),
                                 system=self.force_eval == "invariant")
-        self.quad = {"nx": nx, "dV": dV}                               # for checks
         # linear stiffness and scalar mass (Eq. 54: M = Ms x I_3), assembled
         KL = assemble_blocks(self.KLe, DPN, self.n_full)
         Ms = assemble_blocks(scalar_mass(rho, dV, tab.N), SLOTS, self.n_slots)

@@ -11,13 +11,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from fxflex.beam.elements import ANCF_SLOTS, AncfTables, ancf_tables, gauss
+from fxflex.beam.elements import ANCF_SLOTS, AncfTables, ancf_tables, gauss, hermite, linear
 from fxflex.beam.line import beam_line
 from fxflex.scene import Scene
 
 __all__ = ["QUADRATURE", "SLOTS", "DPN", "elasticity_matrix", "reference_coordinates",
            "voigt_linear", "voigt_pairs", "prism_quadrature", "reference_gradients",
-           "elastic_tensors", "scalar_mass", "assemble_blocks", "line_load"]
+           "elastic_tensors", "centerline_strain", "centerline_pairs", "cartesian_pairs",
+           "linear_from_pairs",
+           "gram_tensors", "reference_jacobian", "scalar_mass", "assemble_blocks", "line_load"]
 
 #: Gauss points per element: along X~, Y~, Z~ (the paper's 5 x 3 x 3)
 QUADRATURE = (5, 3, 3)
@@ -108,13 +110,19 @@ def reference_gradients(e0n: np.ndarray, tab: AncfTables) -> tuple[np.ndarray, n
 
 def elastic_tensors(C: np.ndarray, nx: np.ndarray, dV: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(K_L^e, T1, T4) per element (Eq. 55, 57): the linear stiffness int B_L^T C B_L dV, and the
-    tensors of the Green-strain expansion the invariant engine contracts with the Gram entries,
-    T1 = int (C B_L)^T w dV (2 DPN, 2 SLOTS, 2 SLOTS) and T4 = int w^T C w dV (2 SLOTS)^4, with
-    B_L of :func:`voigt_linear` and w of :func:`voigt_pairs`; dV = det J x Gauss weight."""
-    n_el = nx.shape[0]
-    BL = voigt_linear(nx)                                          # (n_el, nq, 6, 42)
-    W = voigt_pairs(nx)                                            # (n_el, nq, 6, 14, 14)
+    """(K_L^e, T1, T4) per element (Eq. 55, 57) of the continuum Green strain: :func:`gram_tensors`
+    with B_L of :func:`voigt_linear` and w of :func:`voigt_pairs`."""
+    return gram_tensors(C, voigt_linear(nx), voigt_pairs(nx), dV)
+
+
+def gram_tensors(C: np.ndarray, BL: np.ndarray, W: np.ndarray, dV: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(K_L^e, T1, T4) per element of a strain eps = B_L u + 1/2 sum_ab w_ab P_ab (Voigt, P the
+    Gram matrix of the element slots of u): the linear stiffness int B_L^T C B_L dV, and the
+    tensors the invariant engine contracts with the Gram entries, T1 = int (C B_L)^T w dV
+    (2 DPN, 2 SLOTS, 2 SLOTS) and T4 = int w^T C w dV (2 SLOTS)^4; dV = det J x Gauss weight.
+    BL (n_el, nq, 6, 2 DPN), W (n_el, nq, 6, 2 SLOTS, 2 SLOTS)."""
+    n_el = BL.shape[0]
     CBL = np.einsum("vw,eqwk->eqvk", C, BL)
     KLe = np.einsum("eq,eqvk,eqvl->ekl", dV, BL, CBL)
     T1 = np.matmul((CBL * dV[..., None, None]).reshape(n_el, -1, 2 * DPN).transpose(0, 2, 1),
@@ -127,8 +135,85 @@ def elastic_tensors(C: np.ndarray, nx: np.ndarray, dV: np.ndarray
     return KLe, T1, T4
 
 
+#: element slots of the centerline (r, dr/dX~ of both nodes) and of the first-order section
+#: gradients dr/dY~, dr/dZ~ (node 0, node 1)
+CENTERLINE, SECTION_Y, SECTION_Z = (0, 1, SLOTS, SLOTS + 1), (2, SLOTS + 2), (3, SLOTS + 3)
+
+
+def centerline_strain(e0n: np.ndarray, tab: AncfTables, X: np.ndarray, Y: np.ndarray,
+                      Z: np.ndarray, le: float) -> tuple[np.ndarray, np.ndarray]:
+    """(B_L, w) per element and Gauss point of the locking-free variant's strain (centerline
+    curvature, tied shears), for :func:`gram_tensors`: :func:`centerline_pairs` turned to the
+    reference axes by :func:`cartesian_pairs`, linearised at e0 by :func:`linear_from_pairs`."""
+    W = cartesian_pairs(centerline_pairs(tab, X, Y, Z, le),
+                        np.linalg.inv(reference_jacobian(e0n, tab)))
+    e0e = np.stack([e0n[:-1], e0n[1:]], axis=1).reshape(len(e0n) - 1, 2 * SLOTS, 3)
+    return linear_from_pairs(W, e0e), W
+
+
+def centerline_pairs(tab: AncfTables, X: np.ndarray, Y: np.ndarray, Z: np.ndarray, le: float
+                     ) -> np.ndarray:
+    """Wt (nq, 3, 3, 2 SLOTS, 2 SLOTS): the covariant Green strain of the locking-free variant,
+    E~_ij = 1/2 sum_ab Wt_ij,ab (e_a . e_b - e0_a . e0_b) on the prism coordinates X~
+    (docs/beams.md, "Locking-free variants"). It is the continuum's 1/2 (g_i . g_j - G_i . G_j),
+    g_i = dr/dX~_i, with the terms of the centerline r (cubic) and the section gradients r_Y, r_Z
+    (linear in X~) changed, each still a combination of Gram entries of the slots:
+
+    - tied transverse shears: gamma_Y = r' . r_Y and gamma_Z = r' . r_Z in g_X . g_Y and
+      g_X . g_Z, r' quadratic against a linear r_Y, r_Z (a mismatch that locks), become their
+      values at the nodes, where r' is the slot dr/dX~, interpolated linearly (an assumed
+      covariant strain of the MITC kind): gamma~ = sum_k L_k(X~) dr/dX~_k . dr/dY~_k;
+    - bending: in g_X . g_X the terms 2 Y~ r' . r_Y' and 2 Z~ r' . r_Z' (r_Y', r_Z' constant: a
+      curvature constant per element) become 2 Y~ (gamma~_Y' - r'' . r_Y) and the same in Z~,
+      by the identity r' . r_Z' = (r' . r_Z)' - r'' . r_Z with the tied shear in place of
+      r' . r_Z: the centerline's curvature (linear per element) where the shear vanishes, and a
+      Timoshenko curvature (section rotation gradient) at the clamped root, whose section gradients
+      are prescribed while dr/dX~ is free.
+
+    tab: :func:`fxflex.beam.elements.ancf_tables` at the points (X, Y, Z) (X = xi in [0, 1])."""
+    dN = tab.dN
+    Wt = 0.5 * (np.einsum("qai,qbj->qijab", dN, dN) + np.einsum("qaj,qbi->qijab", dN, dN))
+    H2 = hermite(X, le, 2)[2]                     # r'' coefficients of the CENTERLINE slots
+    L, dL = linear(X, le, 1)
+    for j, g, section in ((1, Y, SECTION_Y), (2, Z, SECTION_Z)):
+        for n, s in enumerate(section):
+            for m, c in enumerate(CENTERLINE):
+                own = m == 2 * n + 1          # the pair (dr/dX~, section gradient) of node n
+                Wt[:, 0, 0, c, s] = Wt[:, 0, 0, s, c] = g * (own * dL[:, n] - H2[:, m] * L[:, n])
+                tied = 0.5 * L[:, n] if own else 0.0
+                for i, k in ((0, j), (j, 0)):
+                    Wt[:, i, k, c, s] = Wt[:, i, k, s, c] = tied
+    return Wt
+
+
+def cartesian_pairs(Wt: np.ndarray, Jinv: np.ndarray) -> np.ndarray:
+    """w (n_el, nq, 6, m, m) in Voigt order (engineering shears) of E = J^-T E~ J^-1, the Green
+    strain in the reference configuration's Cartesian axes from the covariant one (Wt of
+    :func:`centerline_pairs`, Jinv (n_el, nq, 3, 3) the inverse reference Jacobian)."""
+    Wc = np.einsum("eqik,eqjl,qijab->eqklab", Jinv, Jinv, Wt)
+    out = [Wc[:, :, i, i] for i in range(3)]
+    out += [2 * Wc[:, :, j, k] for j, k in ((0, 1), (1, 2), (2, 0))]
+    return np.stack(out, axis=2)
+
+
+def linear_from_pairs(W: np.ndarray, e0e: np.ndarray) -> np.ndarray:
+    """B_L (n_el, nq, 6, 3 m) of a strain 1/2 sum_ab w_ab (e_a . e_b - e0_a . e0_b): its derivative
+    at e0, sum_a w_ab e0_a on coordinate (b, i); e0e (n_el, m, 3). With it, the strain of a rigid
+    motion of e0 is zero to all orders, as the engine's rigid-motion check asks."""
+    n_el, nq, nv, m, _ = W.shape
+    return np.einsum("eqvab,eai->eqvbi", W, e0e).reshape(n_el, nq, nv, 3 * m)
+
+
+def reference_jacobian(e0n: np.ndarray, tab: AncfTables) -> np.ndarray:
+    """J = dx0/dX~ (n_el, nq, 3, 3) of the reference configuration e0 (n_nodes, SLOTS, 3)."""
+    n_el = e0n.shape[0] - 1
+    e0e = np.stack([e0n[:-1], e0n[1:]], axis=1).reshape(n_el, 2 * SLOTS, 3)
+    return np.einsum("eai,qaj->eqij", e0e, tab.dN)
+
+
 def scalar_mass(rho: float, dV: np.ndarray, N: np.ndarray) -> np.ndarray:
-    """M_s^e = int rho N_a N_b dV per element (Eq. 54, M = M_s (x) I_3): (n_el, 2 SLOTS, 2 SLOTS)."""
+    """M_s^e = int rho N_a N_b dV per element (Eq. 54, M = M_s (x) I_3):
+    (n_el, 2 SLOTS, 2 SLOTS)."""
     n_el, nq = dV.shape[0], N.shape[0]
     return rho * np.einsum("eq,qa,qb->eab", np.broadcast_to(dV, (n_el, nq)), N, N)
 
