@@ -28,6 +28,7 @@ from fxflex.cache import KINDS as CACHE_KINDS
 from fxflex.errors import FxflexError, OutputError
 from fxflex.io.paths import Output, check_paths
 from fxflex.scene import METHODS, load_scene
+from fxflex.scene.load import ANY_SECTION
 
 __all__ = ["main"]
 
@@ -261,9 +262,9 @@ def cmd_info(args, comm) -> None:
 
     scene = _scene_from_args(args)
     methods = [args.method] if args.method else list(METHODS)
-    # the methods refuse other sections for now (docs/sections.md): no dof to show
+    # the methods that do not take other sections yet refuse them (docs/sections.md)
     paper = scene.geometry.paper_shape
-    dofs = {m: dof_count(m, scene) if paper else None for m in methods}
+    dofs = {m: dof_count(m, scene) if paper or m in ANY_SECTION else None for m in methods}
     payload = envelope(scene, methods={m: {"description": method_info()[m], "dof": dofs[m]}
                                        for m in methods})
     lines = [f"fxflex {__version__}   scene {scene.hash}"]
@@ -273,7 +274,8 @@ def cmd_info(args, comm) -> None:
     lines.append("methods:")
     for m in methods:
         d = dofs[m]
-        note = "" if d is not None else ("  (dof known after preprocessing)" if paper else
+        note = "" if d is not None else ("  (dof known after preprocessing)"
+                                         if paper or m in ANY_SECTION else
                                          "  (runs on the paper's section only so far)")
         lines.append(f"  {m:5s} dof {d if d is not None else '-':>7}   {method_info()[m]}{note}")
     lines += ["discretisation (README, docs/accuracy.md, docs/beams.md):",

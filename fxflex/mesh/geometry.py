@@ -69,9 +69,24 @@ class BeamShape:
         self.g = geometry
         self.L = geometry.length
         self.twist_rad = np.radians(geometry.twist_deg)
+        self._span = None       # the 2-D section analysis, for a section not the paper's
+
+    @property
+    def span(self):
+        """:class:`fxflex.section.span.SpanSections` of a section other than the paper's
+        rectangle (analysed on first use), or None."""
+        if self._span is None and not self.g.paper_shape:
+            from fxflex.section.span import SpanSections
+            self._span = SpanSections(self.g)
+        return self._span
 
     def sizes(self, x):
-        """(b, h, theta) at distance x from the root: sizes along y~, z~ and the twist angle."""
+        """(b, h, theta) at distance x from the root: sizes along y~, z~ and the twist angle
+        (linear, or from the stations table)."""
+        if self.g.stations:
+            xs = np.asarray(x, float)
+            rows = np.array([self.span.blade.sizes(float(v))[:3] for v in xs.ravel()])
+            return tuple(rows[:, k].reshape(xs.shape) for k in range(3))
         s = np.asarray(x, float) / self.L
         g = self.g
         return (g.root_y + (g.tip_y - g.root_y) * s, g.root_z + (g.tip_z - g.root_z) * s,
@@ -89,7 +104,15 @@ class BeamShape:
         return self.point(x, b * np.asarray(eta, float), h * np.asarray(zeta, float))
 
     def section(self, x) -> SectionProperties:
+        """Properties at stations x: closed forms for the paper's rectangle, the interpolated
+        2-D analysis (:mod:`fxflex.section.span`) for any other section, whose torsion constant
+        is the Saint-Venant J whatever ``section.torsion`` says."""
         x = np.asarray(x, float)
+        if self.span is not None:
+            A, I_Y, I_Z, I_YZ, J = self.span.hub(x)
+            zero = np.zeros_like(x)
+            return SectionProperties(x=x, A=A, S_Y=zero, S_Z=zero, I_Y=I_Y, I_Z=I_Z, I_YZ=I_YZ,
+                                     J_polar=J, J_saint_venant=J)
         b, h, th = self.sizes(x)
         c2, s2, sc = np.cos(th) ** 2, np.sin(th) ** 2, np.sin(th) * np.cos(th)
         Iy_loc = b * h**3 / 12.0   # int z~^2 dA
@@ -102,7 +125,10 @@ class BeamShape:
             J_saint_venant=saint_venant_rectangle(b, h))
 
     def corners(self, x: float) -> np.ndarray:
-        """(4, 2): (Y, Z) of the four corners of the section at distance x from the root."""
+        """(4, 2): (Y, Z) of the four corners of the section at distance x from the root; for
+        a section other than the paper's, the (n, 2) points of its outer contour."""
+        if self.span is not None:
+            return self.span.outline_points(x)
         b, h, _ = self.sizes(x)
         yt = 0.5 * b * np.array([1.0, -1.0, -1.0, 1.0])
         zt = 0.5 * h * np.array([1.0, 1.0, -1.0, -1.0])

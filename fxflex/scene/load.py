@@ -73,18 +73,23 @@ def _twist_per_element(scene: Scene, key: str, count: int, what: str) -> None:
                               f"section; allowed: at least {need} {what}")
 
 
+#: the methods that run on every section of SPEC section 9 (the others: the paper's only)
+ANY_SECTION = ("lebb", "nebb")
+
+
 def validate_for(method: str, scene: Scene) -> None:
     """What only ``method`` needs of the scene: a mesh whose elements do not degenerate and a
-    modal basis no larger than the mesh; the paper's section shape until the methods take the
-    others (issue 14: ``fxflex section`` analyses every shape)."""
+    modal basis no larger than the mesh; for the methods that do not take them yet, the paper's
+    section shape (LEBB and NEBB take every section of SPEC section 9 through its 2-D analysis,
+    issue 14)."""
     g = scene.geometry
-    if not g.paper_shape:
+    if not g.paper_shape and method not in ANY_SECTION:
         key = ("geometry.stations" if g.stations else "geometry.wall" if g.wall
                else "geometry.section")
         raise SceneError(key, f"{method} runs on the paper's section only so far (a solid "
                               f"rectangle, linear taper and twist); allowed: section = "
-                              f"\"rectangle\", wall = 0, no stations (fxflex section analyses "
-                              f"this blade)")
+                              f"\"rectangle\", wall = 0, no stations, or a method that takes "
+                              f"any section: {', '.join(ANY_SECTION)}")
     if method in ("ffrf", "gcms", "tlf"):
         nx, ny, nz = scene.mesh.solid
         _twist_per_element(scene, "mesh.solid", nx, "divisions along X")

@@ -96,10 +96,11 @@ def test_naca_keys():
         _scene("geometry.section=circle")
 
 
-@pytest.mark.parametrize("method", ["lebb", "tlf"])
+@pytest.mark.parametrize("method", ["ffrf", "tlf", "ancf"])
 def test_methods_refuse_other_sections(method):
-    """Until the methods take them, a non-paper section is refused with one line naming the key
-    (not run on the rectangle's properties)."""
+    """The methods that do not take them yet refuse a non-paper section with one line naming
+    the key (not run on the rectangle's properties); LEBB and NEBB take them
+    (tests/section/test_beams_any_section.py)."""
     from fxflex.formulation import build
 
     with pytest.raises(SceneError, match="geometry.section: .*paper's section only"):
