@@ -16,7 +16,8 @@ from fxflex.beam.line import beam_line
 from fxflex.scene import Scene
 
 __all__ = ["QUADRATURE", "SLOTS", "DPN", "elasticity_matrix", "reference_coordinates",
-           "voigt_linear", "voigt_pairs", "prism_quadrature", "reference_gradients",
+           "voigt_linear", "voigt_pairs", "prism_quadrature", "section_rule",
+           "reference_gradients",
            "elastic_tensors", "centerline_strain", "centerline_pairs", "cartesian_pairs",
            "linear_from_pairs",
            "gram_tensors", "reference_jacobian", "scalar_mass", "assemble_blocks", "line_load"]
@@ -53,11 +54,12 @@ def reference_coordinates(scene: Scene) -> np.ndarray:
     line = beam_line(scene, 1)
     g = scene.geometry
     b, h, th = line.shape.sizes(line.x_nodes)
+    b0, h0, _ = line.shape.sizes(0.0)           # the prism's section is the root's
     e0 = np.zeros((line.n_nodes, SLOTS, 3))
     e0[:, 0, 0] = g.hub_radius + line.x_nodes
     e0[:, 1, 0] = 1.0
-    e0[:, 2, 1], e0[:, 2, 2] = b / g.root_y * np.cos(th), b / g.root_y * np.sin(th)
-    e0[:, 3, 1], e0[:, 3, 2] = -h / g.root_z * np.sin(th), h / g.root_z * np.cos(th)
+    e0[:, 2, 1], e0[:, 2, 2] = b / b0 * np.cos(th), b / b0 * np.sin(th)
+    e0[:, 3, 1], e0[:, 3, 2] = -h / h0 * np.sin(th), h / h0 * np.cos(th)
     return e0
 
 
@@ -87,13 +89,53 @@ def voigt_pairs(nx: np.ndarray) -> np.ndarray:
 def prism_quadrature(scene: Scene, le: float
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(X~, Y~, Z~, w): the tensor Gauss rule of QUADRATURE on one element's straight prism
-    [0, le] x [-b0/2, b0/2] x [-h0/2, h0/2] (b0, h0 the root sizes), X~ slowest."""
+    [0, le] x [-b0/2, b0/2] x [-h0/2, h0/2] (b0, h0 the root sizes), X~ slowest. For a section
+    other than the paper's rectangle the prism is [0, le] x the root section about its centroid,
+    with :func:`section_rule` across it."""
     g = scene.geometry
+    if not g.paper_shape:
+        xa, wa = gauss(QUADRATURE[0])
+        ys, zs, ws = section_rule(scene)
+        X = np.repeat(xa, len(ws))
+        Y, Z = np.tile(ys, len(xa)), np.tile(zs, len(xa))
+        return X, Y, Z, np.einsum("a,b->ab", wa * le, ws).ravel()
     (xa, wa), (yb, wb), (zc, wc) = (gauss(n) for n in QUADRATURE)
     yb, zc = (yb - 0.5) * g.root_y, (zc - 0.5) * g.root_z
     X, Y, Z = (a.ravel() for a in np.meshgrid(xa, yb, zc, indexing="ij"))
     wq = np.einsum("a,b,c->abc", wa * le, wb * g.root_y, wc * g.root_z).ravel()
     return X, Y, Z, wq
+
+
+#: section rule for other sections: Gauss points per direction on the root's bounding box
+SECTION_GRID = 5
+
+
+def section_rule(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(Y~, Z~, w): a rule across the root section (about its centroid) exact for every
+    polynomial of total degree 4 -- the degree of the energy density and of the mass integrand
+    of Eq. 52-55 in the section coordinates (position quadratic, gradients linear, Green strain
+    quadratic): SECTION_GRID x SECTION_GRID Gauss points on the section's bounding box, weights
+    the least-norm solution matching the 15 moments of the polygon
+    (:func:`fxflex.section.outline.moments`). The paper's rectangle keeps its 3 x 3 Gauss rule."""
+    from fxflex.section.blade import Blade
+    from fxflex.section.outline import moments
+
+    outline = Blade(scene.geometry).outline(0.0)
+    m1 = moments(outline, 1)
+    c = np.array([m1[1, 0], m1[0, 1]]) / m1[0, 0]
+    M = moments(outline, 4, origin=c)
+    lo, hi = outline.outer.min(axis=0) - c, outline.outer.max(axis=0) - c
+    g, _ = gauss(SECTION_GRID)
+    ys, zs = (lo[k] + (hi[k] - lo[k]) * g for k in (0, 1))
+    Y, Z = (a.ravel() for a in np.meshgrid(ys, zs, indexing="ij"))
+    s = 0.5 * (hi - lo)                                  # scaled monomials: a well-posed fit
+    pairs = [(i, j) for i in range(5) for j in range(5 - i)]
+    V = np.array([(Y / s[0]) ** i * (Z / s[1]) ** j for i, j in pairs])
+    rhs = np.array([M[i, j] / (s[0] ** i * s[1] ** j) for i, j in pairs])
+    w = np.linalg.lstsq(V, rhs, rcond=None)[0]
+    if not np.allclose(V @ w, rhs, rtol=1e-10, atol=1e-12 * abs(rhs[0])):
+        raise ValueError("section_rule: the moments cannot be matched on the grid")
+    return Y, Z, w
 
 
 def reference_gradients(e0n: np.ndarray, tab: AncfTables) -> tuple[np.ndarray, np.ndarray]:

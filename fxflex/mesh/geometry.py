@@ -70,14 +70,23 @@ class BeamShape:
         self.L = geometry.length
         self.twist_rad = np.radians(geometry.twist_deg)
         self._span = None       # the 2-D section analysis, for a section not the paper's
+        self._blade = None
+
+    @property
+    def blade(self):
+        """:class:`fxflex.section.blade.Blade`: the scene's sections and sizes along the span."""
+        if self._blade is None:
+            from fxflex.section.blade import Blade
+            self._blade = Blade(self.g)
+        return self._blade
 
     @property
     def span(self):
         """:class:`fxflex.section.span.SpanSections` of a section other than the paper's
         rectangle (analysed on first use), or None."""
         if self._span is None and not self.g.paper_shape:
-            from fxflex.section.span import SpanSections
-            self._span = SpanSections(self.g)
+            from fxflex.section.span import span_sections
+            self._span = span_sections(self.g)
         return self._span
 
     def sizes(self, x):
@@ -85,7 +94,7 @@ class BeamShape:
         (linear, or from the stations table)."""
         if self.g.stations:
             xs = np.asarray(x, float)
-            rows = np.array([self.span.blade.sizes(float(v))[:3] for v in xs.ravel()])
+            rows = np.array([self.blade.sizes(float(v))[:3] for v in xs.ravel()])
             return tuple(rows[:, k].reshape(xs.shape) for k in range(3))
         s = np.asarray(x, float) / self.L
         g = self.g

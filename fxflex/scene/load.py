@@ -74,7 +74,7 @@ def _twist_per_element(scene: Scene, key: str, count: int, what: str) -> None:
 
 
 #: the methods that run on every section of SPEC section 9 (the others: the paper's only)
-ANY_SECTION = ("lebb", "nebb")
+ANY_SECTION = ("lebb", "nebb", "ancf")
 
 
 def validate_for(method: str, scene: Scene) -> None:
@@ -104,6 +104,23 @@ def validate_for(method: str, scene: Scene) -> None:
     if method == "ancf":
         _twist_per_element(scene, "mesh.beam_elements", scene.mesh.beam_elements,
                            "ANCF elements")
+        # ANCF's reference configuration stretches the root section (Eq. 52: section gradients
+        # scaled by the sizes): a wall that keeps its thickness while the section tapers is not a
+        # stretch of the root section
+        tapered = bool(g.stations) or (g.root_y, g.root_z) != (g.tip_y, g.tip_z)
+        if g.wall > 0 and tapered or (g.stations and _stations_wall(g)):
+            raise SceneError("geometry.wall", "ancf takes a hollow section only untapered (its "
+                                              "reference stretches the root section along the "
+                                              "span; a wall does not stretch with it); allowed: "
+                                              "root and tip sizes equal and no stations, or "
+                                              "lebb, nebb")
+
+
+def _stations_wall(g) -> bool:
+    """Whether the stations table has a wall column with values."""
+    from fxflex.section.blade import read_stations
+
+    return any(not math.isnan(v) for v in read_stations(g.stations, g.length)[:, 4])
 
 
 def _read_toml(path: str | os.PathLike) -> dict:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["Outline", "CURVE_POINTS", "rectangle", "ellipse", "naca4", "naca_digits", "polygon",
-           "hollow", "signed_area", "self_intersects"]
+           "hollow", "signed_area", "self_intersects", "moments"]
 
 #: vertices on a curved outline (ellipse, airfoil: half on each surface)
 CURVE_POINTS = 512
@@ -43,6 +43,40 @@ class Outline:
         """(size along y, size along z) of the outer contour's bounding box."""
         span = self.outer.max(axis=0) - self.outer.min(axis=0)
         return float(span[0]), float(span[1])
+
+
+#: the 6-point rule of degree 4 on the unit triangle (Strang and Fix): barycentric a, b, weight
+_T4 = ((0.816847572980459, 0.091576213509771, 0.109951743655322),
+       (0.108103018168070, 0.445948490915965, 0.223381589678011))
+
+
+def moments(outline: Outline, degree: int = 4, origin=(0.0, 0.0)) -> np.ndarray:
+    """M[i, j] = int (y - y0)^i (z - z0)^j dA over the section for i + j <= degree (<= 4),
+    exact for the polygon: each contour is fanned from ``origin`` into signed triangles (the
+    outer contour counter-clockwise, a hole clockwise, so the fan of any simple polygon sums
+    to its integral) and each triangle takes a rule exact to degree 4."""
+    if degree > 4:
+        raise ValueError("moments: the triangle rule is exact to degree 4")
+    bary, wts = [], []
+    for a, b, w in _T4:
+        for perm in ((a, b, b), (b, a, b), (b, b, a)):
+            bary.append(perm)
+            wts.append(w)
+    bary, wts = np.array(bary), np.array(wts)          # weights sum to 1 (times the area)
+    o = np.asarray(origin, float)
+    M = np.zeros((degree + 1, degree + 1))
+    for pts in outline.contours():
+        p = pts - o
+        q = np.roll(p, -1, axis=0)
+        area = 0.5 * (p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1])       # signed, fan from origin
+        # points of each triangle (0, p, q): bary (l0, l1, l2) -> l1 p + l2 q
+        y = bary[:, 1, None] * p[None, :, 0] + bary[:, 2, None] * q[None, :, 0]
+        z = bary[:, 1, None] * p[None, :, 1] + bary[:, 2, None] * q[None, :, 1]
+        w = wts[:, None] * area[None, :]
+        for i in range(degree + 1):
+            for j in range(degree + 1 - i):
+                M[i, j] += float(np.sum(w * y**i * z**j))
+    return M
 
 
 def signed_area(points: np.ndarray) -> float:

@@ -35,7 +35,26 @@ import numpy as np
 
 from fxflex.section.blade import DEFAULT_STATIONS, Blade
 
-__all__ = ["SpanSections"]
+__all__ = ["SpanSections", "span_sections"]
+
+#: analyses kept in this process, by geometry and the state of its files (builds of one scene at
+#: several speeds, a study over element counts: the section analysis runs once)
+_KEPT: dict = {}
+
+
+def span_sections(geometry) -> "SpanSections":
+    """The :class:`SpanSections` of ``geometry``, analysed once per process (the contour and
+    stations files' size and modification time are part of the key)."""
+    import os
+
+    files = tuple((p, os.stat(p).st_mtime_ns, os.stat(p).st_size)
+                  for p in (geometry.contour, geometry.stations) if p)
+    key = (geometry, files)
+    if key not in _KEPT:
+        if len(_KEPT) > 16:
+            _KEPT.clear()
+        _KEPT[key] = SpanSections(geometry)
+    return _KEPT[key]
 
 
 class SpanSections:

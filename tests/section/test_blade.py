@@ -96,10 +96,10 @@ def test_naca_keys():
         _scene("geometry.section=circle")
 
 
-@pytest.mark.parametrize("method", ["ffrf", "tlf", "ancf"])
+@pytest.mark.parametrize("method", ["ffrf", "tlf"])
 def test_methods_refuse_other_sections(method):
     """The methods that do not take them yet refuse a non-paper section with one line naming
-    the key (not run on the rectangle's properties); LEBB and NEBB take them
+    the key (not run on the rectangle's properties); the beams take them
     (tests/section/test_beams_any_section.py)."""
     from fxflex.formulation import build
 
