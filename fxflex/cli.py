@@ -151,7 +151,9 @@ def make_parser() -> argparse.ArgumentParser:
                    help="write the time series as it goes (without --out and --fields nothing "
                         "is sampled: only the final deflection is reported)")
     p.add_argument("--fields", metavar="FILE.xdmf",
-                   help="write the displacement field every --fields-every samples (solids)")
+                   help="write the fields every --fields-every samples, every method (XDMF "
+                        "for ParaView: u, U_hub; beams: on the centerline, with the section "
+                        "rotation)")
     p.add_argument("--fields-every", type=int, default=100, metavar="N",
                    help="samples between field snapshots, default 100")
     p.add_argument("--sample-dt", type=_positive("--sample-dt"), metavar="DT",
@@ -466,7 +468,7 @@ def _open_outputs(args, comm, scene, plan: _RunPlan, form, layout, implicit: dic
     fields = None
     if args.fields:
         if form.field_writer is None:
-            raise FxflexError(f"--fields: not available for {args.method} (solid methods only)")
+            raise FxflexError(f"--fields: not available for {args.method}")
         fields = form.field_writer(args.fields)
     columns = ["t_s", "longitudinal_m", "orthogonal_m", "load_m"] + list(form.extra_columns)
     settings, series = plan.settings, plan.series

@@ -22,9 +22,9 @@ SMALL = {"ffrf": ["mesh.solid=[10,2,2]", "reduction.ffrf_modes=12"],
 OFFERS = {"ffrf": {"extras", "root_stress", "field_writer", "rotating_state"},
           "gcms": {"extras", "root_stress", "field_writer", "rotating_state"},
           "tlf": {"root_stress", "field_writer", "state_points"},
-          "lebb": {"extras", "root_stress", "rotating_state"},
-          "nebb": {"extras", "root_stress", "rotating_state"},
-          "ancf": {"root_stress", "rotating_state"}}
+          "lebb": {"extras", "root_stress", "field_writer", "rotating_state"},
+          "nebb": {"extras", "root_stress", "field_writer", "rotating_state"},
+          "ancf": {"root_stress", "field_writer", "rotating_state"}}
 
 _BUILT: dict = {}
 

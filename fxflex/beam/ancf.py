@@ -390,6 +390,12 @@ class ANCF(FormulationBase):
             self._omega_max = omega_max(self.KL_dense[f], np.kron(self.Ms, np.eye(3))[f])
         return self._omega_max
 
+    def field_writer(self, path: str, comm=None):
+        """``--fields``: the beam line with U_hub, u and the polar rotation of the gradients
+        (XDMF from rank 0 of ``comm``; :func:`fxflex.beam.beam_fields.ancf_field_writer`)."""
+        from fxflex.beam.beam_fields import ancf_field_writer
+        return ancf_field_writer(self, path, comm)
+
 
 class HubFrameLU(HubFrameFactor):
     """Dense LU of the iteration matrix in the hub frame, S_hub = A_d^T S A_d on the free

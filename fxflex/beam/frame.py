@@ -345,6 +345,12 @@ class FloatingFrameBeam(FormulationBase):
         Q -= self.scene.load.factor(t) * self.fq_root
         return self.line.shape.axial_stress(0.0, (-Q[0], Q[5], -Q[4]))
 
+    def field_writer(self, path: str, comm=None):
+        """``--fields``: the beam line with U_hub, u and the nodal rotation theta (XDMF, written
+        by rank 0 of ``comm``, default COMM_WORLD; :mod:`fxflex.beam.beam_fields`)."""
+        from fxflex.beam.beam_fields import frame_field_writer
+        return frame_field_writer(self, path, comm)
+
     # ------------------------------------------------------------------ steady state and stability
     def _stiffness(self, W: np.ndarray, rate: float) -> np.ndarray:
         """Effective tangent K_L + K_N,T(W) - phi'^2 N [+ c/rho phi' G]."""
