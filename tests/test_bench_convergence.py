@@ -76,3 +76,23 @@ def test_extrapolation_recovers_a_known_limit():
     ext = bench._extrapolated(n, tips)
     assert ext[:2] == pytest.approx([1.0, -2.0], abs=1e-12)
     assert ext[2] == 0.0                            # no decaying differences: the finest value
+
+
+def test_spinup_reference_refuses_a_sequence_that_does_not_settle():
+    """Case (ii): a theory's answer at a time is extrapolated only where the finest levels'
+    in-plane differences shrink monotonically; where they change sign (ANCF's buckling on fine
+    meshes) there is none, and a row's error there is taken against NEBB's answer."""
+    rows = []
+    for n in (10, 20, 40):
+        settle = -1.0 + 0.4 / n**2
+        wild = -1.0 + (0.4 / n**2 if n < 40 else 0.3)          # jumps at the finest level
+        rows.append({"case": "ii", "method": "ancf", "variant": "locking-free", "n": n,
+                     "tips": {"2.5": [0.0, settle, 0.0], "7.5": [0.0, wild, 0.0]}})
+    ref = bench.spinup_reference(rows)
+    assert ref["2.5"][1] == pytest.approx(-1.0, abs=1e-12) and ref["7.5"] is None
+    nebb = {"2.5": [0.0, -1.0, 0.0], "7.5": [0.0, -0.5, 0.0]}
+    bench.spinup_errors(rows, {"ancf": ref, "nebb": nebb})
+    last = rows[-1]
+    assert last["errors"]["7.5"] is None
+    assert last["errors_vs_nebb"]["7.5"] == pytest.approx(0.4)
+    assert last["error"] == pytest.approx(0.4)          # the worst time, NEBB's where none
