@@ -28,7 +28,6 @@ from fxflex.cache import KINDS as CACHE_KINDS
 from fxflex.errors import FxflexError, OutputError
 from fxflex.io.paths import Output, check_paths
 from fxflex.scene import METHODS, load_scene
-from fxflex.scene.load import ANY_SECTION
 
 __all__ = ["main"]
 
@@ -265,8 +264,7 @@ def cmd_info(args, comm) -> None:
     scene = _scene_from_args(args)
     methods = [args.method] if args.method else list(METHODS)
     # the methods that do not take other sections yet refuse them (docs/sections.md)
-    paper = scene.geometry.paper_shape
-    dofs = {m: dof_count(m, scene) if paper or m in ANY_SECTION else None for m in methods}
+    dofs = {m: dof_count(m, scene) if _takes(m, scene) else None for m in methods}
     payload = envelope(scene, methods={m: {"description": method_info()[m], "dof": dofs[m]}
                                        for m in methods})
     lines = [f"fxflex {__version__}   scene {scene.hash}"]
@@ -277,8 +275,8 @@ def cmd_info(args, comm) -> None:
     for m in methods:
         d = dofs[m]
         note = "" if d is not None else ("  (dof known after preprocessing)"
-                                         if paper or m in ANY_SECTION else
-                                         "  (runs on the paper's section only so far)")
+                                         if _takes(m, scene) else
+                                         "  (refuses this section: see fxflex steady)")
         lines.append(f"  {m:5s} dof {d if d is not None else '-':>7}   {method_info()[m]}{note}")
     lines += ["discretisation (README, docs/accuracy.md, docs/beams.md):",
               "  mesh.solid_degree = 1 (the paper's Q1, 1.6-1.7 % stiff on the default blade) | 2 "
@@ -287,6 +285,20 @@ def cmd_info(args, comm) -> None:
               "slender blades)",
               "  which for 1 %, 0.1 %: docs/accuracy.md; measured by fxflex bench convergence"]
     _emit(comm, args, payload, "\n".join(lines))
+
+
+def _takes(method: str, scene) -> bool:
+    """Whether ``method`` runs on the scene's section (fxflex.scene.load.validate_for)."""
+    from fxflex.errors import SceneError
+    from fxflex.scene.load import validate_for
+
+    if scene.geometry.paper_shape:
+        return True
+    try:
+        validate_for(method, scene)
+    except SceneError:
+        return False
+    return True
 
 
 def _warn(comm, warnings: list[str], *notes: str | None) -> None:

@@ -106,36 +106,54 @@ def prism_quadrature(scene: Scene, le: float
     return X, Y, Z, wq
 
 
-#: section rule for other sections: Gauss points per direction on the root's bounding box
-SECTION_GRID = 5
+#: section rule for other sections: the polynomial degree it integrates exactly, and the Gauss
+#: grids on the root section's bounding box whose interior points it may use
+SECTION_DEGREE = 8
+SECTION_GRIDS = (12, 18, 27, 40)
 
 
 def section_rule(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(Y~, Z~, w): a rule across the root section (about its centroid) exact for every
-    polynomial of total degree 4 -- the degree of the energy density and of the mass integrand
-    of Eq. 52-55 in the section coordinates (position quadratic, gradients linear, Green strain
-    quadratic): SECTION_GRID x SECTION_GRID Gauss points on the section's bounding box, weights
-    the least-norm solution matching the 15 moments of the polygon
-    (:func:`fxflex.section.outline.moments`). The paper's rectangle keeps its 3 x 3 Gauss rule."""
+    """(Y~, Z~, w): a rule across the root section (about its centroid) with positive weights at
+    points inside it, exact for every polynomial of total degree SECTION_DEGREE in Y~, Z~. With
+    the quadratic section terms of Eq. 51 the position is quadratic in Y~, Z~, the Green strain
+    up to quartic and the energy density up to degree 8 on a straight, untwisted element; the
+    mass integrand is of degree 4. (With twist or taper the reference Jacobian makes them
+    rational: then the rule, as the paper's 3 x 3 Gauss rule on the rectangle, is an
+    approximation.) The weights are the non-negative least-squares fit (a Tchakaloff rule:
+    at most 45 points) of the polygon's moments (:func:`fxflex.section.outline.moments`) on the
+    interior points of a Gauss grid over the bounding box, refined until the fit is exact to
+    1e-10. The paper's rectangle keeps its 3 x 3 Gauss rule."""
+    from matplotlib.path import Path
+    from scipy.optimize import nnls
+
     from fxflex.section.blade import Blade
     from fxflex.section.outline import moments
 
     outline = Blade(scene.geometry).outline(0.0)
     m1 = moments(outline, 1)
     c = np.array([m1[1, 0], m1[0, 1]]) / m1[0, 0]
-    M = moments(outline, 4, origin=c)
+    d = SECTION_DEGREE
+    M = moments(outline, d, origin=c)
     lo, hi = outline.outer.min(axis=0) - c, outline.outer.max(axis=0) - c
-    g, _ = gauss(SECTION_GRID)
-    ys, zs = (lo[k] + (hi[k] - lo[k]) * g for k in (0, 1))
-    Y, Z = (a.ravel() for a in np.meshgrid(ys, zs, indexing="ij"))
     s = 0.5 * (hi - lo)                                  # scaled monomials: a well-posed fit
-    pairs = [(i, j) for i in range(5) for j in range(5 - i)]
-    V = np.array([(Y / s[0]) ** i * (Z / s[1]) ** j for i, j in pairs])
+    pairs = [(i, j) for i in range(d + 1) for j in range(d + 1 - i)]
     rhs = np.array([M[i, j] / (s[0] ** i * s[1] ** j) for i, j in pairs])
-    w = np.linalg.lstsq(V, rhs, rcond=None)[0]
-    if not np.allclose(V @ w, rhs, rtol=1e-10, atol=1e-12 * abs(rhs[0])):
-        raise ValueError("section_rule: the moments cannot be matched on the grid")
-    return Y, Z, w
+    for n in SECTION_GRIDS:
+        g, _ = gauss(n)
+        Y, Z = (a.ravel() for a in np.meshgrid(lo[0] + (hi[0] - lo[0]) * g,
+                                               lo[1] + (hi[1] - lo[1]) * g, indexing="ij"))
+        pts = np.column_stack([Y, Z])
+        inside = Path(outline.outer - c).contains_points(pts)
+        if outline.inner is not None:
+            inside &= ~Path(outline.inner - c).contains_points(pts)
+        Y, Z = Y[inside], Z[inside]
+        V = np.array([(Y / s[0]) ** i * (Z / s[1]) ** j for i, j in pairs])
+        w, _ = nnls(V, rhs, maxiter=50 * V.shape[1])
+        if np.allclose(V @ w, rhs, rtol=0, atol=1e-10 * abs(rhs[0])):
+            keep = w > 0
+            return Y[keep], Z[keep], w[keep]
+    raise ValueError("section_rule: no positive rule of degree "
+                     f"{d} on a {SECTION_GRIDS[-1]}-point grid of the section")
 
 
 def reference_gradients(e0n: np.ndarray, tab: AncfTables) -> tuple[np.ndarray, np.ndarray]:

@@ -91,8 +91,9 @@ class BeamShape:
 
     def sizes(self, x):
         """(b, h, theta) at distance x from the root: sizes along y~, z~ and the twist angle
-        (linear, or from the stations table)."""
-        if self.g.stations:
+        (linear; for another section than the paper's, :meth:`Blade.sizes`: the stations
+        table, a naca4 thickness from its digits)."""
+        if not self.g.paper_shape:
             xs = np.asarray(x, float)
             rows = np.array([self.blade.sizes(float(v))[:3] for v in xs.ravel()])
             return tuple(rows[:, k].reshape(xs.shape) for k in range(3))

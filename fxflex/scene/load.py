@@ -117,10 +117,10 @@ def validate_for(method: str, scene: Scene) -> None:
 
 
 def _stations_wall(g) -> bool:
-    """Whether the stations table has a wall column with values."""
+    """Whether the stations table gives a wall anywhere (a column of zeros is a solid section)."""
     from fxflex.section.blade import read_stations
 
-    return any(not math.isnan(v) for v in read_stations(g.stations, g.length)[:, 4])
+    return any(v > 0 for v in read_stations(g.stations, g.length)[:, 4])
 
 
 def _read_toml(path: str | os.PathLike) -> dict:

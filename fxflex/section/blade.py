@@ -135,15 +135,20 @@ class Blade:
             self.root_sizes = (float(self.table[0, 1]), float(self.table[0, 2]))
 
     def sizes(self, x: float) -> tuple[float, float, float, float]:
-        """(size_y, size_z, twist in rad, wall) at x."""
+        """(size_y, size_z, twist in rad, wall) at x; for naca4 size_z is the airfoil's
+        thickness t x chord whatever the Z keys say (they may be left at the paper's values)."""
         g = self.geometry
         if self.table is None:
             s = x / g.length
-            return g.size_y(s), g.size_z(s), g.twist(s), g.wall
-        t = self.table
-        by, bz, tw = (float(np.interp(x, t[:, 0], t[:, k])) for k in (1, 2, 3))
-        wall = g.wall if np.isnan(t[:, 4]).all() else float(np.interp(x, t[:, 0], t[:, 4]))
-        return by, bz, math.radians(tw), wall
+            by, bz, tw, wall = g.size_y(s), g.size_z(s), g.twist(s), g.wall
+        else:
+            t = self.table
+            by, bz, tw = (float(np.interp(x, t[:, 0], t[:, k])) for k in (1, 2, 3))
+            tw = math.radians(tw)
+            wall = g.wall if np.isnan(t[:, 4]).all() else float(np.interp(x, t[:, 0], t[:, 4]))
+        if g.section == "naca4":
+            bz = naca_digits(g.airfoil)[2] * by
+        return by, bz, tw, wall
 
     def stations(self, n: int | None = None) -> np.ndarray:
         """The table's rows, or n (default DEFAULT_STATIONS) evenly spaced stations."""

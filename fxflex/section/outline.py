@@ -45,37 +45,24 @@ class Outline:
         return float(span[0]), float(span[1])
 
 
-#: the 6-point rule of degree 4 on the unit triangle (Strang and Fix): barycentric a, b, weight
-_T4 = ((0.816847572980459, 0.091576213509771, 0.109951743655322),
-       (0.108103018168070, 0.445948490915965, 0.223381589678011))
-
-
 def moments(outline: Outline, degree: int = 4, origin=(0.0, 0.0)) -> np.ndarray:
-    """M[i, j] = int (y - y0)^i (z - z0)^j dA over the section for i + j <= degree (<= 4),
-    exact for the polygon: each contour is fanned from ``origin`` into signed triangles (the
-    outer contour counter-clockwise, a hole clockwise, so the fan of any simple polygon sums
-    to its integral) and each triangle takes a rule exact to degree 4."""
-    if degree > 4:
-        raise ValueError("moments: the triangle rule is exact to degree 4")
-    bary, wts = [], []
-    for a, b, w in _T4:
-        for perm in ((a, b, b), (b, a, b), (b, b, a)):
-            bary.append(perm)
-            wts.append(w)
-    bary, wts = np.array(bary), np.array(wts)          # weights sum to 1 (times the area)
+    """M[i, j] = int (y - y0)^i (z - z0)^j dA over the section for i + j <= degree, exact for
+    the polygon: by Green's theorem int y^i z^j dA = 1 / (i + 1) oint y^(i+1) z^j dz along every
+    contour (the outer one counter-clockwise, a hole clockwise), each straight edge integrated by
+    Gauss-Legendre with enough points for the degree i + j + 1 of the integrand along it."""
     o = np.asarray(origin, float)
+    t, w = np.polynomial.legendre.leggauss(degree // 2 + 2)
+    t, w = 0.5 * (t + 1.0), 0.5 * w                                 # on [0, 1]
     M = np.zeros((degree + 1, degree + 1))
     for pts in outline.contours():
         p = pts - o
-        q = np.roll(p, -1, axis=0)
-        area = 0.5 * (p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1])       # signed, fan from origin
-        # points of each triangle (0, p, q): bary (l0, l1, l2) -> l1 p + l2 q
-        y = bary[:, 1, None] * p[None, :, 0] + bary[:, 2, None] * q[None, :, 0]
-        z = bary[:, 1, None] * p[None, :, 1] + bary[:, 2, None] * q[None, :, 1]
-        w = wts[:, None] * area[None, :]
+        d = np.roll(p, -1, axis=0) - p                               # edge vectors
+        y = p[None, :, 0] + t[:, None] * d[None, :, 0]               # (points, edges)
+        z = p[None, :, 1] + t[:, None] * d[None, :, 1]
+        dz = w[:, None] * d[None, :, 1]
         for i in range(degree + 1):
             for j in range(degree + 1 - i):
-                M[i, j] += float(np.sum(w * y**i * z**j))
+                M[i, j] += float(np.sum(y ** (i + 1) * z**j * dz)) / (i + 1)
     return M
 
 
