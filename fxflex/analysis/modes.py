@@ -35,7 +35,7 @@ from fxflex.scene import Scene
 
 __all__ = ["LABELS", "Modes", "direction_labels", "tip_radius", "modes_of", "speed_builder",
            "campbell", "CampbellData", "plot_campbell", "parse_range",
-           "check_speeds"]
+           "check_speeds", "sample_of", "campbell_tracked", "tracking_lines"]
 
 LABELS = ("axial", "in-plane", "out-of-plane", "torsion")
 
@@ -208,6 +208,44 @@ def campbell(build_at, speeds, pairs: int, progress=None) -> list[Modes]:
         if progress is not None:
             progress(i, modes)
     return out
+
+
+def sample_of(form, pairs: int, extra: int | None = None, requested: bool = True):
+    """The :class:`~fxflex.analysis.tracking.Sample` at the formulation's speed: the ``pairs``
+    reported modes (:func:`modes_of`) and ``pairs + extra`` candidates (default EXTRA_MODES)
+    with their mass products. Collective for TLF. The candidates are solved first: the
+    reported modes are the lowest of them (the formulation keeps its eigensolve)."""
+    from fxflex.analysis.tracking import EXTRA_MODES, Sample, mass_times
+    from fxflex.numerics.qep import EigenNotConverged
+
+    extra = EXTRA_MODES if extra is None else extra
+    t0 = time.perf_counter()
+    try:
+        lam, X = form.rotating_modes(pairs + extra)
+    except EigenNotConverged as exc:
+        lam, X = exc.eigenvalues, exc.vectors
+        if X is None:
+            lam, X = lam[:0], np.zeros((0, 0), dtype=complex)
+    modes = modes_of(form, pairs)
+    if lam.size:
+        labels = direction_labels(form.mode_tip(X), tip_radius(form.scene))
+        MX = mass_times(form, X)
+    else:
+        labels, MX = [], X
+    modes.seconds = time.perf_counter() - t0           # the eigensolve is the candidates'
+    return Sample(rpm=float(form.scene.rotation.rpm), modes=modes, lam=lam, X=X, MX=MX,
+                  labels=labels, comm=form.comm if form.distributed else None,
+                  requested=requested)
+
+
+def campbell_tracked(build_at, speeds, pairs: int, method: str = "", progress=None):
+    """Campbell branches over ``speeds`` tracked by MAC (:func:`fxflex.analysis.tracking.track`,
+    refined where a MAC falls below 0.9) from the formulations ``build_at(rpm)``;
+    ``progress(sample)`` is called after each speed computed."""
+    from fxflex.analysis.tracking import track
+
+    return track(lambda rpm, requested: sample_of(build_at(rpm), pairs, requested=requested),
+                 speeds, pairs, method=method, progress=progress)
 
 
 _COLOURS = {"axial": "tab:green", "in-plane": "tab:blue", "out-of-plane": "tab:orange",
@@ -430,7 +468,7 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
 
     done = []
 
-    def progress(sample, count):
+    def progress(sample):
         m = sample.modes
         if sample.requested:
             done.append(m)
@@ -447,11 +485,9 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
         sys.stderr.write(f"fxflex modes: {method} Campbell diagram, {len(speeds)} speeds from "
                          f"{speeds[0]:g} to {speeds[-1]:g} rpm, {pairs} modes each, tracked by "
                          f"MAC\n")
-    from fxflex.analysis.tracking import track
-
     t0 = time.perf_counter()
-    tracking = track(speed_builder(method, scene, comm, options), speeds, pairs, method=method,
-                     progress=progress)
+    tracking = campbell_tracked(speed_builder(method, scene, comm, options), speeds, pairs,
+                                method, progress)
     modes = [s.modes for s in tracking.samples if s.requested]
     data = CampbellData(method, speeds, modes)
     ranges = data.unstable_ranges()

@@ -1,4 +1,4 @@
-"""Campbell branches followed from speed to speed by the modal assurance criterion (SPEC section 10).
+"""Campbell branches followed from speed to speed by the modal assurance criterion (SPEC 10).
 
 At each speed the formulation gives its lowest roots lambda and mode vectors x (``rotating_modes``,
 a few more than are reported, so that a branch can be followed when it leaves the lowest ``n``).
@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Sample", "Branch", "Tracking", "sample_of", "mass_times", "mac_matrix", "assign",
+__all__ = ["Sample", "Branch", "Tracking", "mass_times", "mac_matrix", "assign",
            "track", "resonances", "ordinal", "HARMONICS", "MAC_THRESHOLD", "REFINE_LEVELS",
            "EXTRA_MODES", "DECAYING_REAL"]
 
@@ -209,31 +209,6 @@ def assign(mac: np.ndarray, lam: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def sample_of(form, pairs: int, extra: int = EXTRA_MODES, requested: bool = True) -> Sample:
-    """The ``pairs`` reported modes (:func:`fxflex.analysis.modes.modes_of`) and ``pairs +
-    extra`` candidates with their mass products, at the formulation's speed. Collective for
-    TLF. The candidates are solved first: the reported modes are the lowest of them (the
-    eigensolve is kept by the formulation)."""
-    from fxflex.analysis.modes import direction_labels, modes_of, tip_radius
-    from fxflex.numerics.qep import EigenNotConverged
-
-    try:
-        lam, X = form.rotating_modes(pairs + extra)
-    except EigenNotConverged as exc:
-        lam, X = exc.eigenvalues, exc.vectors
-        if X is None:
-            lam, X = lam[:0], np.zeros((0, 0), dtype=complex)
-    modes = modes_of(form, pairs)
-    if lam.size:
-        labels = direction_labels(form.mode_tip(X), tip_radius(form.scene))
-        MX = mass_times(form, X)
-    else:
-        labels, MX = [], X
-    return Sample(rpm=float(form.scene.rotation.rpm), modes=modes, lam=lam, X=X, MX=MX,
-                  labels=labels, comm=form.comm if form.distributed else None,
-                  requested=requested)
-
-
 def _step(prev: Sample, index: np.ndarray, nxt: Sample) -> tuple[np.ndarray, np.ndarray]:
     """(candidate index at ``nxt`` per branch, MAC to ``prev``) for branches at ``index`` of
     ``prev``; a branch without a mode at ``prev`` (-1) gets none."""
@@ -252,23 +227,23 @@ def _step(prev: Sample, index: np.ndarray, nxt: Sample) -> tuple[np.ndarray, np.
     return idx, mac
 
 
-def track(build_at, speeds, pairs: int, *, method: str = "", extra: int = EXTRA_MODES,
+def track(sample_at, speeds, pairs: int, *, method: str = "",
           threshold: float = MAC_THRESHOLD, levels: int = REFINE_LEVELS,
           progress=None) -> Tracking:
     """Branches of the ``pairs`` lowest modes at ``speeds[0]`` followed over ``speeds``
     (ascending rpm) by MAC, each interval bisected up to ``levels`` times where a branch's MAC
-    falls below ``threshold`` (module docstring). ``build_at(rpm)`` gives the formulation at a
-    speed; ``progress(sample, count)`` is called after each speed computed (``count`` the
-    speeds so far). Collective for TLF."""
+    falls below ``threshold`` (module docstring). ``sample_at(rpm, requested)`` gives the
+    :class:`Sample` at a speed (:func:`fxflex.analysis.modes.sample_of` of the formulation
+    there); ``progress(sample)`` is called after each speed computed. Collective for TLF."""
     t0 = time.perf_counter()
     samples: list[Sample] = []
     indices: list[np.ndarray] = []
     macs: list[np.ndarray] = []
 
     def compute(rpm: float, requested: bool) -> Sample:
-        s = sample_of(build_at(float(rpm)), pairs, extra, requested)
+        s = sample_at(float(rpm), requested)
         if progress is not None:
-            progress(s, len(samples) + 1)
+            progress(s)
         return s
 
     def accept(s: Sample, idx: np.ndarray, mac: np.ndarray) -> None:
