@@ -16,7 +16,9 @@ whichever of |U_X|, |U_Y|, |U_Z| and r |theta_X| is largest, r the polar radius 
 sqrt((b^2 + h^2) / 12) of the tip section (the mean displacement of the section's points when it
 turns by theta_X). Mode vectors are complex (gyroscopic coupling); the moduli compare amplitudes.
 
-A Campbell diagram repeats this over a range of speeds (:func:`campbell`).
+A Campbell diagram repeats this over a range of speeds (:func:`campbell`); ``fxflex modes
+--campbell`` follows each mode from speed to speed by MAC (:func:`campbell_tracked`,
+:mod:`fxflex.analysis.tracking`).
 """
 
 from __future__ import annotations

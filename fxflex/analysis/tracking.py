@@ -157,7 +157,7 @@ def mass_times(form, X: np.ndarray) -> np.ndarray:
     free = lin.free                 # TLF's linearisation: owned-entry index of each coordinate
     full = np.zeros(lin.n_owned)
     out = np.zeros(lin.n_owned)
-    MX = np.empty_like(X)
+    MX = np.empty(X.shape, dtype=complex)
     for j in range(X.shape[1]):
         parts = []
         for part in (X[:, j].real, X[:, j].imag):
