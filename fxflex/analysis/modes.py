@@ -16,7 +16,9 @@ whichever of |U_X|, |U_Y|, |U_Z| and r |theta_X| is largest, r the polar radius 
 sqrt((b^2 + h^2) / 12) of the tip section (the mean displacement of the section's points when it
 turns by theta_X). Mode vectors are complex (gyroscopic coupling); the moduli compare amplitudes.
 
-A Campbell diagram repeats this over a range of speeds (:func:`campbell`).
+A Campbell diagram repeats this over a range of speeds (:func:`campbell`); ``fxflex modes
+--campbell`` follows each mode from speed to speed by MAC (:func:`campbell_tracked`,
+:mod:`fxflex.analysis.tracking`).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from fxflex.scene import Scene
 
 __all__ = ["LABELS", "Modes", "direction_labels", "tip_radius", "modes_of", "speed_builder",
            "campbell", "CampbellData", "plot_campbell", "parse_range",
-           "check_speeds"]
+           "check_speeds", "sample_of", "campbell_tracked", "tracking_lines"]
 
 LABELS = ("axial", "in-plane", "out-of-plane", "torsion")
 
@@ -210,24 +212,91 @@ def campbell(build_at, speeds, pairs: int, progress=None) -> list[Modes]:
     return out
 
 
+def sample_of(form, pairs: int, extra: int | None = None, requested: bool = True):
+    """The :class:`~fxflex.analysis.tracking.Sample` at the formulation's speed: the ``pairs``
+    reported modes (:func:`modes_of`) and ``pairs + extra`` candidates (default EXTRA_MODES)
+    with their mass products. Collective for TLF. The candidates are solved first: the
+    reported modes are the lowest of them (the formulation keeps its eigensolve)."""
+    from fxflex.analysis.tracking import EXTRA_MODES, Sample, mass_times
+    from fxflex.numerics.qep import EigenNotConverged
+
+    extra = EXTRA_MODES if extra is None else extra
+    t0 = time.perf_counter()
+    try:
+        lam, X = form.rotating_modes(pairs + extra)
+    except EigenNotConverged as exc:
+        lam, X = exc.eigenvalues, exc.vectors
+        if X is None:
+            lam, X = lam[:0], np.zeros((0, 0), dtype=complex)
+    modes = modes_of(form, pairs)
+    if lam.size:
+        labels = direction_labels(form.mode_tip(X), tip_radius(form.scene))
+        MX = mass_times(form, X)
+    else:
+        labels, MX = [], X
+    modes.seconds = time.perf_counter() - t0           # the eigensolve is the candidates'
+    return Sample(rpm=float(form.scene.rotation.rpm), modes=modes, lam=lam, X=X, MX=MX,
+                  labels=labels, comm=form.comm if form.distributed else None,
+                  requested=requested)
+
+
+def campbell_tracked(build_at, speeds, pairs: int, method: str = "", progress=None):
+    """Campbell branches over ``speeds`` tracked by MAC (:func:`fxflex.analysis.tracking.track`,
+    refined where a MAC falls below 0.9) from the formulations ``build_at(rpm)``;
+    ``progress(sample)`` is called after each speed computed."""
+    from fxflex.analysis.tracking import track
+
+    return track(lambda rpm, requested: sample_of(build_at(rpm), pairs, requested=requested),
+                 speeds, pairs, method=method, progress=progress)
+
+
 _COLOURS = {"axial": "tab:green", "in-plane": "tab:blue", "out-of-plane": "tab:orange",
             "torsion": "tab:purple"}
 
 
-def plot_campbell(data: CampbellData, path: str) -> None:
-    """Frequencies against speed, coloured by direction, the 1x and 2x rotation lines, and the
-    speed ranges where the equilibrium is unstable shaded (PNG, matplotlib Agg)."""
+def plot_campbell(data: CampbellData, path: str, tracking=None) -> None:
+    """Frequencies against speed, coloured by direction, the 1x..4x rotation lines, and the
+    speed ranges where the equilibrium is unstable shaded (PNG, matplotlib Agg). With the
+    ``tracking`` of :func:`fxflex.analysis.tracking.track` the lines are its branches (coloured by
+    family, one line style per ordinal) and a black ring marks each speed where a branch's MAC to
+    the previous speed stayed below the threshold; without it, the j-th lowest mode of each
+    direction is joined from speed to speed."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    f, g, labels = data.table()
     fig, ax = plt.subplots(figsize=(7.5, 5.0))
     for lo, hi in data.unstable_ranges():
         ax.axvspan(lo, hi, color="tab:red", alpha=0.15, lw=0)
-    # thin lines join the j-th lowest mode of each direction from speed to speed; past a
-    # divergence speed an oscillating pair becomes two real roots +-a (0 Hz), of which only the
-    # growing one continues the branch, so that the count stays aligned
+    if tracking is None:
+        top = _plot_sorted(ax, data)
+        rpm = data.rpm
+    else:
+        top = _plot_branches(ax, tracking)
+        rpm = tracking.rpm
+    styles = ("--", ":", "-.", (0, (6, 2, 1, 2, 1, 2)))
+    for h, ls in zip(range(1, 5), styles):
+        ax.plot(rpm, h * rpm / 60.0, color="k", ls=ls, lw=0.9, label=f"{h}x rotation")
+    ax.set_ylim(0, 1.05 * max(top, 2 * rpm[-1] / 60.0))
+    ax.set_xlim(rpm[0], rpm[-1])
+    ax.set_xlabel("hub speed (rpm)")
+    ax.set_ylabel("frequency in the rotating frame (Hz)")
+    what = "branches tracked by MAC, " if tracking is not None else ""
+    ax.set_title(f"Campbell diagram, {data.method.upper()} ({what}shaded: unstable equilibrium)",
+                 fontsize=10)
+    ax.legend(fontsize=7, loc="upper left", ncol=2)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _plot_sorted(ax, data: CampbellData) -> float:
+    """The untracked drawing: points coloured by direction, thin lines joining the j-th lowest
+    of each direction; the highest frequency drawn."""
+    f, g, labels = data.table()
+    # past a divergence speed an oscillating pair becomes two real roots +-a (0 Hz), of which
+    # only the growing one continues the branch, so that the count stays aligned
     for lab in LABELS:
         branch = np.full_like(f, np.nan)
         for i in range(f.shape[0]):
@@ -247,19 +316,35 @@ def plot_campbell(data: CampbellData, path: str) -> None:
                        label=None if (lab, growing) in seen else
                        (f"{lab}, growing" if growing else lab))
             seen.add((lab, growing))
-    top = np.nanmax(f) if np.isfinite(f).any() else 1.0
-    ax.plot(data.rpm, data.rpm / 60.0, "k--", lw=1, label="1x rotation")
-    ax.plot(data.rpm, 2 * data.rpm / 60.0, "k:", lw=1, label="2x rotation")
-    ax.set_ylim(0, 1.05 * max(top, 2 * data.rpm[-1] / 60.0))
-    ax.set_xlim(data.rpm[0], data.rpm[-1])
-    ax.set_xlabel("hub speed (rpm)")
-    ax.set_ylabel("frequency in the rotating frame (Hz)")
-    ax.set_title(f"Campbell diagram, {data.method.upper()} (shaded: unstable equilibrium)")
-    ax.legend(fontsize=8, loc="upper left")
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    return float(np.nanmax(f)) if np.isfinite(f).any() else 1.0
+
+
+def _plot_branches(ax, tracking) -> float:
+    """Each tracked branch as a line with small points at the speeds computed, growing roots as
+    red crosses, rings where the MAC stayed below the threshold; the highest frequency drawn."""
+    styles = ("-", "--", "-.", ":")
+    count: dict[str, int] = {}
+    top = 1.0
+    low_seen = grow_seen = False
+    for b in tracking.branches:
+        k = count[b.family] = count.get(b.family, 0) + 1
+        f, g = b.frequencies_hz, b.growth_rates
+        ax.plot(tracking.rpm, f, color=_COLOURS[b.family], ls=styles[(k - 1) % 4], lw=1.2,
+                marker="o", ms=2.5, label=b.label, zorder=2)
+        grow = g > 0
+        if grow.any():
+            ax.scatter(tracking.rpm[grow], f[grow], s=24, marker="x", color="tab:red", zorder=3,
+                       label=None if grow_seen else "growing")
+            grow_seen = True
+        low = b.mac < tracking.threshold
+        if low.any():
+            ax.scatter(tracking.rpm[low], f[low], s=60, facecolors="none", edgecolors="k",
+                       lw=1.2, zorder=4,
+                       label=None if low_seen else f"MAC < {tracking.threshold:g}")
+            low_seen = True
+        if np.isfinite(f).any():
+            top = max(top, float(np.nanmax(f)))
+    return top
 
 
 # -- the ``fxflex modes`` command -------------------------------------------------------------------
@@ -271,22 +356,65 @@ def modes_table(modes: Modes) -> list[str]:
     return lines
 
 
-def _write_campbell(data: CampbellData, out_dir: str, payload: dict) -> dict[str, str]:
+def _write_campbell(data: CampbellData, out_dir: str, payload: dict, tracking=None
+                    ) -> dict[str, str]:
+    """The PNG, the CSV of the modes at the requested speeds (one row per speed and mode), with
+    ``tracking`` the CSV of its branches (one row per speed and branch), and the JSON."""
     import json
 
     from fxflex.io.payload import jsonable
 
     stem = os.path.join(out_dir, f"campbell_{data.method}")
     files = {"png": stem + ".png", "csv": stem + ".csv", "json": stem + ".json"}
-    plot_campbell(data, files["png"])
+    if tracking is not None:
+        files["branches_csv"] = stem + "_branches.csv"
+    plot_campbell(data, files["png"], tracking)
     with open(files["csv"], "w") as fh:
         fh.write("rpm,mode,frequency_hz,growth_rate_1_s,label,stable\n")
         for m in data.modes:
             for j, (f, g, lab) in enumerate(zip(m.frequencies_hz, m.growth_rates, m.labels)):
                 fh.write(f"{m.rpm:g},{j + 1},{f:.10g},{g:.10g},{lab},{m.stable}\n")
+    if tracking is not None:
+        with open(files["branches_csv"], "w") as fh:
+            fh.write("rpm,branch,family,frequency_hz,growth_rate_1_s,damping_ratio,mac,"
+                     "direction,refined\n")
+            for b in tracking.branches:
+                rows = zip(tracking.rpm, b.frequencies_hz, b.growth_rates, b.damping_ratios,
+                           b.mac, b.directions, tracking.requested)
+                for rpm, f, g, z, mac, d, req in rows:
+                    fh.write(f"{rpm:g},{b.label},{b.family},{f:.10g},{g:.10g},{z:.6g},"
+                             f"{mac:.6f},{d},{not req}\n")
     with open(files["json"], "w") as fh:
         json.dump(jsonable({**payload, "files": files}), fh, indent=1)
     return files
+
+
+def tracking_lines(tracking) -> list[str]:
+    """The text of the tracked branches: per branch its frequencies at the ends, lowest MAC and
+    where its tip direction changes family (a veering); then the resonance speeds."""
+    lines = [f"  branches tracked by MAC over {tracking.rpm.size} speeds "
+             f"({tracking.refined} added by refinement where a MAC fell below "
+             f"{tracking.threshold:g}):"]
+    for b in tracking.branches:
+        f = b.frequencies_hz
+        mac = np.nanmin(b.mac) if np.isfinite(b.mac).any() else float("nan")
+        change = [i for i in range(1, len(b.directions))
+                  if b.directions[i] and b.directions[i] != b.directions[i - 1]]
+        turn = "; tip " + ", ".join(f"{b.directions[i]} from {tracking.rpm[i]:g} rpm"
+                                    for i in change) if change else ""
+        lines.append(f"    {b.label:<20s} {f[0]:9.2f} -> {f[-1]:9.2f} Hz, lowest MAC "
+                     f"{mac:.3f}{turn}")
+    low = tracking.low_mac()
+    if low:
+        lines.append("  MAC below the threshold after refinement: " + ", ".join(
+            f"{lab} at {rpm:g} rpm ({mac:.2f})" for lab, rpm, mac in low))
+    if tracking.resonances:
+        lines.append("  resonances (branch crosses h x rotation frequency):")
+        for r in sorted(tracking.resonances, key=lambda r: r["rpm"]):
+            lines.append(f"    {r['rpm']:9.1f} rpm  {r['harmonic']}x  {r['branch']}")
+    else:
+        lines.append("  resonances: no branch crosses the 1x..4x lines in the range")
+    return lines
 
 
 def _log_warnings(comm, notes: list[str]) -> None:
@@ -340,10 +468,16 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
             text.append(f"  written: {path}")
         return payload, "\n".join(text)
 
-    def progress(i, m):
+    done = []
+
+    def progress(sample):
+        m = sample.modes
+        if sample.requested:
+            done.append(m)
         if comm.rank == 0:
             f = m.frequencies_hz
-            sys.stderr.write(f"  {method} {m.rpm:8.1f} rpm ({i + 1}/{len(speeds)}): lowest "
+            where = (f"({len(done)}/{len(speeds)})" if sample.requested else "refined")
+            sys.stderr.write(f"  {method} {m.rpm:8.1f} rpm {where}: lowest "
                              f"{f[0]:.2f} Hz, max growth {m.growth_rates.max():+.4g} 1/s, "
                              f"{ {True: 'stable', False: 'UNSTABLE'}.get(m.stable, 'undecided')}"
                              f"  {m.seconds:.1f} s\n")
@@ -351,9 +485,12 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
 
     if comm.rank == 0:
         sys.stderr.write(f"fxflex modes: {method} Campbell diagram, {len(speeds)} speeds from "
-                         f"{speeds[0]:g} to {speeds[-1]:g} rpm, {pairs} modes each\n")
+                         f"{speeds[0]:g} to {speeds[-1]:g} rpm, {pairs} modes each, tracked by "
+                         f"MAC\n")
     t0 = time.perf_counter()
-    modes = campbell(speed_builder(method, scene, comm, options), speeds, pairs, progress)
+    tracking = campbell_tracked(speed_builder(method, scene, comm, options), speeds, pairs,
+                                method, progress)
+    modes = [s.modes for s in tracking.samples if s.requested]
     data = CampbellData(method, speeds, modes)
     ranges = data.unstable_ranges()
     payload = envelope(scene, method=method, damping=damping, n=pairs, campbell={
@@ -361,18 +498,22 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
         "growth_rates": [m.growth_rates.tolist() for m in modes],
         "labels": [m.labels for m in modes], "stable": [m.stable for m in modes],
         "unstable_rpm": ranges},
-        warnings=list(dict.fromkeys(w for m in modes for w in m.warnings)),
+        **tracking.to_dict(), refined_rpm=tracking.rpm[~tracking.requested].tolist(),
+        low_mac=[{"branch": lab, "rpm": rpm, "mac": mac}
+                 for lab, rpm, mac in tracking.low_mac()],
+        warnings=list(dict.fromkeys(w for s in tracking.samples for w in s.modes.warnings)),
         timings_s={"total": time.perf_counter() - t0})
     files = {}
     if comm.rank == 0:
         os.makedirs(out_dir, exist_ok=True)
-        files = _write_campbell(data, out_dir, payload)
+        files = _write_campbell(data, out_dir, payload, tracking)
     files = comm.bcast(files, root=0)
     payload["files"] = files
     text = [f"{method} Campbell diagram, {len(speeds)} speeds, {pairs} modes each "
             f"({payload['timings_s']['total']:.1f} s)",
             "  unstable equilibrium: " + (", ".join(f"{a:g}-{b:g} rpm" for a, b in ranges)
                                           if ranges else "nowhere in the range"),
+            *tracking_lines(tracking),
             *(f"  {k}: {v}" for k, v in files.items()),
             *(f"  WARNING: {note}" for note in payload["warnings"])]
     _log_warnings(comm, payload["warnings"])
