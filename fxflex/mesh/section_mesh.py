@@ -114,20 +114,14 @@ def _curve_loop(geo, points: np.ndarray) -> tuple[int, list[tuple[int, int]]]:
     for run in _pieces(points):
         ids = [point(p) for p in run]
         curves.append(geo.addLine(*ids) if len(ids) == 2 else geo.addSpline(ids))
-        counts.append(max(1, int(round(np.linalg.norm(np.diff(run, axis=0), axis=1).sum()))))
-    if sum(counts) % 2:
-        counts[int(np.argmax(counts))] += 1
+        length = np.linalg.norm(np.diff(run, axis=0), axis=1).sum()
+        counts.append(2 * max(1, int(round(length / 2))))
     return geo.addCurveLoop(curves), list(zip(curves, counts))
 
 
-def generate_section_mesh(gmsh, shape: BeamShape, divisions, order: int = 1) -> None:
-    """Build the hexahedral mesh of the body into the current gmsh model, with the physical
-    surfaces "root" (1) and "tip" (2) and the volume "beam" (1) of :mod:`fxflex.mesh.solid`."""
-    nx, ny, nz = (int(n) for n in divisions)
-    out, area0 = root_outline(shape)
-    _check_stretch(shape, area0)
-    ey, ez = out.extent
-    scale = np.array([ny / ey, nz / ez])                 # unit elements in these coordinates
+def _section_quads(gmsh, out: Outline, scale: np.ndarray, order: int):
+    """gmsh quadrilaterals of the section in unit-element coordinates: (nodes (m, 2) in the
+    section's own y~, z~, quads (k, 4 or 9) of node indices, counter-clockwise, gmsh order)."""
     geo = gmsh.model.occ
     loops, counts = [], []
     for c in out.contours():
@@ -135,7 +129,6 @@ def generate_section_mesh(gmsh, shape: BeamShape, divisions, order: int = 1) -> 
         loops.append(loop)
         counts += m
     surface = geo.addPlaneSurface(loops)
-    top = geo.extrude([(2, surface)], shape.L, 0.0, 0.0, numElements=[nx], recombine=True)
     geo.synchronize()
     # the splines' interior vertices stay free points of the model: drop them (no mesh nodes)
     used = {t for _, t in gmsh.model.getBoundary(gmsh.model.getEntities(1), False, False)}
@@ -144,12 +137,6 @@ def generate_section_mesh(gmsh, shape: BeamShape, divisions, order: int = 1) -> 
     for tag, m in counts:
         gmsh.model.mesh.setTransfiniteCurve(tag, m + 1)
     gmsh.model.mesh.setRecombine(2, surface)
-    volume = [t for d, t in top if d == 3]
-    tip = top[0][1]
-    for dim, entities, tag, name in ((2, [surface], 1, "root"), (2, [tip], 2, "tip"),
-                                     (3, volume, 1, "beam")):
-        gmsh.model.addPhysicalGroup(dim, entities, tag)
-        gmsh.model.setPhysicalName(dim, tag, name)
     opt = gmsh.option.setNumber
     opt("Mesh.MeshSizeMin", 1.0)
     opt("Mesh.MeshSizeMax", 1.0)
@@ -158,24 +145,75 @@ def generate_section_mesh(gmsh, shape: BeamShape, divisions, order: int = 1) -> 
     opt("Mesh.MeshSizeExtendFromBoundary", 0)
     opt("Mesh.Algorithm", 6)                 # frontal-Delaunay (8 crashes on splines, gmsh 4.8)
     opt("Mesh.RecombinationAlgorithm", 3)    # blossom full-quad: no triangle left
-    gmsh.model.mesh.generate(3)
+    gmsh.model.mesh.generate(2)
     if order != 1:
-        opt("Mesh.SecondOrderIncomplete", 0)                  # 27 nodes, not 20
-        gmsh.model.mesh.setOrder(order)
-    types = gmsh.model.mesh.getElementTypes(3)
-    hexa = {1: 5, 2: 12}[order]
-    if list(types) != [hexa]:
-        raise RuntimeError(f"section mesh: element types {list(types)}, expected [{hexa}] "
-                           f"(hexahedra only)")
-    tags, coords, _ = gmsh.model.mesh.getNodes()
-    ref = coords.reshape(-1, 3)
-    # the layers are exact: snap x to its grid so that the tip lands on x = L
-    x = np.round(ref[:, 0] / shape.L * order * nx) / (order * nx) * shape.L
-    yt, zt = ref[:, 1] / scale[0], ref[:, 2] / scale[1]
+        opt("Mesh.SecondOrderIncomplete", 0)                  # 9-node quads, not 8
+        gmsh.model.mesh.setOrder(order)          # edge midpoints on the splines
+    quad = {1: 3, 2: 10}[order]
+    types = list(gmsh.model.mesh.getElementTypes(2, surface))
+    if types != [quad]:
+        raise RuntimeError(f"section mesh: element types {types}, expected [{quad}] "
+                           f"(quadrilaterals only)")
+    tags, coords, _ = gmsh.model.mesh.getNodes(2, surface, includeBoundary=True)
+    index = {int(t): k for k, t in enumerate(tags)}
+    yz = coords.reshape(-1, 3)[:, 1:] / scale
+    _, conn = gmsh.model.mesh.getElementsByType(quad, surface)
+    quads = np.array([index[int(t)] for t in conn]).reshape(-1, 4 if order == 1 else 9)
+    p = yz[quads[:, :3]]
+    turn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 1])
+    flip = turn < 0                                  # make every quad counter-clockwise
+    if order == 1:
+        quads[flip] = quads[flip][:, [0, 3, 2, 1]]
+    else:
+        quads[flip] = quads[flip][:, [0, 3, 2, 1, 7, 6, 5, 4, 8]]
+    return yz, quads
+
+
+#: 27-node hexahedron (gmsh order) from a 9-node quad (gmsh order) at the levels 0, 1, 2 of a
+#: layer: (quad node, level) per hexahedron node -- corners, the 12 edges, the 6 faces, the centre
+_HEX27 = ([(q, 0) for q in range(4)] + [(q, 2) for q in range(4)]
+          + [(4, 0), (7, 0), (0, 1), (5, 0), (1, 1), (6, 0), (2, 1), (3, 1),
+             (4, 2), (7, 2), (5, 2), (6, 2)]
+          + [(8, 0), (4, 1), (7, 1), (5, 1), (6, 1), (8, 2), (8, 1)])
+
+
+def generate_section_mesh(gmsh, shape: BeamShape, divisions, order: int = 1) -> None:
+    """Build the hexahedral mesh of the body as a new gmsh model (discrete entities), with the
+    physical surfaces "root" (1) and "tip" (2) and the volume "beam" (1) of
+    :mod:`fxflex.mesh.solid`: the section's quads repeated at order nx + 1 levels along X (the
+    layers are exact: x = k L / (order nx)), each node mapped onto the body."""
+    nx, ny, nz = (int(n) for n in divisions)
+    out, area0 = root_outline(shape)
+    _check_stretch(shape, area0)
+    ey, ez = out.extent
+    yz, quads = _section_quads(gmsh, out, np.array([ny / ey, nz / ez]), order)
+    m, levels = len(yz), order * nx + 1
+    x = np.repeat(np.linspace(0.0, shape.L, levels), m)
+    yt, zt = np.tile(yz[:, 0], levels), np.tile(yz[:, 1], levels)
     sy, sz, _ = stretch(shape, x)
     X, Y, Z = _place(shape, x, sy * yt, sz * zt)
-    for tag, a, b, c in zip(tags, X, Y, Z):
-        gmsh.model.mesh.setNode(int(tag), [a, b, c], [])
+    node = lambda q, level: q + level * m + 1                   # noqa: E731 (gmsh node tag)
+    if order == 1:
+        pattern = [(q, 0) for q in range(4)] + [(q, 1) for q in range(4)]
+    else:
+        pattern = _HEX27
+    qi = np.array([q for q, _ in pattern])
+    li = np.array([lv for _, lv in pattern])
+    hexes = np.vstack([node(quads[:, qi], order * k + li) for k in range(nx)])
+    gmsh.model.add("solid")
+    gmsh.model.addDiscreteEntity(3, 1)
+    gmsh.model.addDiscreteEntity(2, 1)
+    gmsh.model.addDiscreteEntity(2, 2)
+    gmsh.model.mesh.addNodes(3, 1, np.arange(1, levels * m + 1),
+                             np.column_stack([X, Y, Z]).ravel())
+    hexa, quad = {1: (5, 3), 2: (12, 10)}[order]
+    gmsh.model.mesh.addElementsByType(1, hexa, [], hexes.ravel())
+    tip = node(quads, levels - 1)
+    gmsh.model.mesh.addElementsByType(1, quad, [], node(quads, 0).ravel())
+    gmsh.model.mesh.addElementsByType(2, quad, [], tip.ravel())
+    for dim, tag, name in ((2, 1, "root"), (2, 2, "tip"), (3, 1, "beam")):
+        gmsh.model.addPhysicalGroup(dim, [tag], tag)
+        gmsh.model.setPhysicalName(dim, tag, name)
 
 
 def _place(shape: BeamShape, x, yt, zt):
