@@ -1,21 +1,25 @@
 """Hexahedral solid mesh of a blade whose section is not the paper's rectangle (SPEC section 9).
 
 The root section (:meth:`fxflex.section.blade.Blade.outline` at x = 0, about its centroid from
-:func:`fxflex.section.outline.moments`) is meshed by gmsh in quadrilaterals, extruded along X in
-nx layers of hexahedra (``Recombine``), and every node is then mapped onto the body: the section
-point (y~, z~) of the root is scaled by the sizes at x, (b(x) / b0, h(x) / h0) (a naca4 section
-scales with its chord along both), and rotated by the twist theta(x) about +X
+:func:`fxflex.section.outline.moments`) is meshed by gmsh in quadrilaterals, which are repeated
+at the nx + 1 (order 2: 2 nx + 1) levels x = k L / (order nx) into nx layers of hexahedra built
+here (deterministic, and fast: gmsh's own extrusion of the 256-pole spline surfaces of an
+airfoil took 5 s), and every node is mapped onto the body: the section point (y~, z~) of the
+root is scaled by the sizes at x, (b(x) / b0, h(x) / h0) (a naca4 section scales with its chord
+along both), and rotated by the twist theta(x) about +X
 (:meth:`fxflex.mesh.geometry.BeamShape.point`). Each section is the root section stretched, so
 the centroid stays on the X axis.
 
 Element size: the quads are made in coordinates stretched by (ny / e_y, nz / e_z), e_y, e_z the
 outline's extents, with a unit target size, so about ny elements lie across the extent along y~
-and nz along z~. The outline (a polygon of up to 512 vertices) enters gmsh as splines through its
-vertices, broken at its corners (a turn of more than :data:`CORNER_DEG`: an airfoil's trailing
+and nz along z~ (a hollow section: smaller, two elements across the thinnest wall). The outline
+(a polygon of up to 512 vertices) enters gmsh as splines through its vertices, broken at its
+corners (a turn of more than :data:`CORNER_DEG`: an airfoil's trailing
 edge, a polygon's vertices); the mesh's boundary nodes lie on those splines, whose distance from
 the polygon is far below the mesh's own polygonal error (the chords between boundary nodes).
-``order=2``: gmsh ``setOrder(2)`` puts the edge midpoints on the splines as well (27-node
-hexahedra, curved boundary), then every node is mapped in the same way.
+``order=2``: gmsh ``setOrder(2)`` puts the quads' edge midpoints on the splines as well (9-node
+quads, curved boundary), the 27-node hexahedra take them at three levels per layer, and every
+node is mapped in the same way.
 
 A wall that does not scale with the section (constant thickness on a tapered blade, or a
 stations table's wall column) is refused: the stretched root would not be the section of the
@@ -98,7 +102,7 @@ def _pieces(points: np.ndarray) -> list[np.ndarray]:
     return runs
 
 
-def _curve_loop(geo, points: np.ndarray) -> tuple[int, list[tuple[int, int]]]:
+def _curve_loop(geo, points: np.ndarray, size: float) -> tuple[int, list[tuple[int, int]]]:
     """A gmsh curve loop through a closed contour (in unit-element coordinates): lines between
     adjacent corners, splines through the vertices elsewhere, each divided into about its length
     in intervals, their total even (a full-quad recombination needs it)."""
@@ -115,17 +119,25 @@ def _curve_loop(geo, points: np.ndarray) -> tuple[int, list[tuple[int, int]]]:
         ids = [point(p) for p in run]
         curves.append(geo.addLine(*ids) if len(ids) == 2 else geo.addSpline(ids))
         length = np.linalg.norm(np.diff(run, axis=0), axis=1).sum()
-        counts.append(2 * max(1, int(round(length / 2))))
+        counts.append(2 * max(1, int(round(length / (2 * size)))))
     return geo.addCurveLoop(curves), list(zip(curves, counts))
 
 
 def _section_quads(gmsh, out: Outline, scale: np.ndarray, order: int):
     """gmsh quadrilaterals of the section in unit-element coordinates: (nodes (m, 2) in the
     section's own y~, z~, quads (k, 4 or 9) of node indices, counter-clockwise, gmsh order)."""
+    size = 1.0
+    if out.inner is not None:
+        # a thin wall: two quads across it at least (the full-quad recombination meshes at
+        # twice the size first, and leaves triangles where one element would span the wall)
+        from shapely.geometry import LinearRing
+
+        wall = LinearRing(out.outer * scale).distance(LinearRing(out.inner * scale))
+        size = min(size, wall / 2)
     geo = gmsh.model.occ
     loops, counts = [], []
     for c in out.contours():
-        loop, m = _curve_loop(geo, c * scale)
+        loop, m = _curve_loop(geo, c * scale, size)
         loops.append(loop)
         counts += m
     surface = geo.addPlaneSurface(loops)
@@ -138,8 +150,8 @@ def _section_quads(gmsh, out: Outline, scale: np.ndarray, order: int):
         gmsh.model.mesh.setTransfiniteCurve(tag, m + 1)
     gmsh.model.mesh.setRecombine(2, surface)
     opt = gmsh.option.setNumber
-    opt("Mesh.MeshSizeMin", 1.0)
-    opt("Mesh.MeshSizeMax", 1.0)
+    opt("Mesh.MeshSizeMin", size)
+    opt("Mesh.MeshSizeMax", size)
     opt("Mesh.MeshSizeFromPoints", 0)
     opt("Mesh.MeshSizeFromCurvature", 0)
     opt("Mesh.MeshSizeExtendFromBoundary", 0)

@@ -7,8 +7,8 @@ and the volume error falls at second order). The result is cached as ``.msh`` in
 keyed by the geometry, the divisions and the ``.geo`` text, and regenerated when any changes
 (never read or written with ``FXFLEX_NO_CACHE=1``, see :mod:`fxflex.cache`).
 Facet tags: ``ROOT`` (x = 0, clamped) and ``TIP`` (x = L). A section other than the paper's
-rectangle is meshed by :mod:`fxflex.mesh.section_mesh` (quadrilaterals of the root section
-extruded in nx layers); its key adds the contour and stations files' text.
+rectangle is meshed by :mod:`fxflex.mesh.section_mesh` (the root section's quadrilaterals
+repeated in nx layers of hexahedra); its key adds the contour and stations files' text.
 
 ``order=2`` makes 27-node hexahedra (gmsh ``setOrder(2)``) whose edge, face and cell midpoints are
 mapped onto the body as well: the geometry is then the quadratic interpolant of the exact twisted
