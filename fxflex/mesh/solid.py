@@ -6,7 +6,9 @@ positions: untwisted, the map is trilinear and the volume exact; twisted, the fa
 and the volume error falls at second order). The result is cached as ``.msh`` in the cache folder
 keyed by the geometry, the divisions and the ``.geo`` text, and regenerated when any changes
 (never read or written with ``FXFLEX_NO_CACHE=1``, see :mod:`fxflex.cache`).
-Facet tags: ``ROOT`` (x = 0, clamped) and ``TIP`` (x = L).
+Facet tags: ``ROOT`` (x = 0, clamped) and ``TIP`` (x = L). A section other than the paper's
+rectangle is meshed by :mod:`fxflex.mesh.section_mesh` (the root section's quadrilaterals
+repeated in nx layers of hexahedra); its key adds the contour and stations files' text.
 
 ``order=2`` makes 27-node hexahedra (gmsh ``setOrder(2)``) whose edge, face and cell midpoints are
 mapped onto the body as well: the geometry is then the quadratic interpolant of the exact twisted
@@ -56,12 +58,23 @@ def mesh_key(geometry: Geometry, divisions, order: int = 1) -> str:
             "code": cache.code_version(__name__, "fxflex.mesh.geometry")}
     if order != 1:
         what["order"] = order
+    if not geometry.paper_shape:
+        # the contour and stations are file paths: their text is what the mesh depends on
+        what["files"] = {k: Path(getattr(geometry, k)).read_text()
+                         for k in ("contour", "stations") if getattr(geometry, k)}
+        what["section_code"] = cache.code_version("fxflex.mesh.section_mesh",
+                                                  "fxflex.section.blade", "fxflex.section.outline")
     text = json.dumps(what, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def _generate(gmsh, shape: BeamShape, divisions, order: int = 1) -> None:
-    """Mesh the unit block from the .geo file and move every node onto the body."""
+    """Mesh the unit block from the .geo file and move every node onto the body; any other
+    section than the paper's rectangle: :mod:`fxflex.mesh.section_mesh`."""
+    if not shape.g.paper_shape:
+        from fxflex.mesh.section_mesh import generate_section_mesh
+        generate_section_mesh(gmsh, shape, divisions, order)
+        return
     for name, value in zip(("nx", "ny", "nz"), divisions):
         gmsh.onelab.setNumber(name, [float(value)])
     gmsh.open(str(GEO_FILE))

@@ -74,7 +74,7 @@ def _twist_per_element(scene: Scene, key: str, count: int, what: str) -> None:
 
 
 #: the methods that run on every section of SPEC section 9 (the others: the paper's only)
-ANY_SECTION = ("lebb", "nebb", "ancf")
+ANY_SECTION = ("lebb", "nebb", "ancf", "ffrf", "gcms", "tlf")
 
 
 def validate_for(method: str, scene: Scene) -> None:

@@ -7,7 +7,9 @@ scene key ``mesh.solid_degree`` (SPEC section 9) chooses it for FFRF, GCMS and T
 converged reference of :mod:`fxflex.analysis.reference` uses it at any scene degree.
 Builds the loads of SPEC section 1 -- consistent nodal forces of the centerline line load and the
 tip force as a uniform traction over the tip face -- and the tip probe (the tip section centre is a
-mesh node that lives on one rank; its displacement is shared with allreduce).
+mesh node that lives on one rank; its displacement is shared with allreduce). A section other than
+the paper's rectangle (SPEC section 9) has no centerline nodes: the line load is a volume force
+q / A(X) along z and the tip probe the area-weighted mean displacement of the tip face.
 """
 
 from __future__ import annotations
@@ -79,6 +81,9 @@ class SolidModel:
     # -- geometry --------------------------------------------------------------------------------
     def _locate_centerline(self) -> None:
         g = self.scene.geometry
+        if not g.paper_shape:
+            self._locate_tip_face()
+            return
         tol = 1e-9 * g.length
         nodes = fem.locate_dofs_geometrical(
             self.V, lambda x: (np.abs(x[1]) < tol) & (np.abs(x[2]) < tol))
@@ -93,6 +98,27 @@ class SolidModel:
         expected = self.degree * self.divisions[0] + 1
         if count != expected or self.comm.allreduce(tip.size) != 1:
             raise RuntimeError(f"centerline: found {count} nodes, expected {expected}")
+
+    def _locate_tip_face(self) -> None:
+        """Any other section (SPEC section 9): no centerline nodes; the tip probe is the tip
+        centroid's displacement, taken as the area-weighted mean over the tip face, u_c =
+        sum_i w_i u_i with w_i = int_tip N_i dA / A_tip (exact for a displacement linear over
+        the face). ``tip_node`` is the tip node nearest the axis (for the sign of modes)."""
+        g = self.scene.geometry
+        self.center_nodes = np.zeros(0, dtype=np.int32)
+        self.center_x = np.zeros(0)
+        self.x0_tip = np.array([g.hub_radius + g.length, 0.0, 0.0])
+        area = self.comm.allreduce(fem.assemble_scalar(fem.form(1.0 * self.ds(TIP))))
+        w = self.vector(ufl.inner(fem.Constant(self.mesh, np.ones(3)), self.u_test)
+                        * self.ds(TIP), zero_clamped=False)
+        self.tip_weights = w.getArray()[: self.n_owned].reshape(-1, 3)[:, 0] / area
+        ft = self.solid_mesh.facet_tags
+        nodes = fem.locate_dofs_topological(self.V, 2, ft.indices[ft.values == TIP])
+        nodes = nodes[nodes < self.n_owned_nodes]
+        r = np.linalg.norm(self.V.tabulate_dof_coordinates()[nodes] - self.x0_tip, axis=1)
+        best = (float(r.min()), self.comm.rank) if nodes.size else (np.inf, self.comm.rank)
+        owner = self.comm.allreduce(best, op=MPI.MIN)[1]
+        self.tip_node = int(nodes[np.argmin(r)]) if self.comm.rank == owner else None
 
     def node_coordinates(self) -> np.ndarray:
         """Undeformed coordinates X0 of the owned nodes, shape (n_owned_nodes, 3)."""
@@ -175,6 +201,8 @@ class SolidModel:
         two ends; Q2 q h / 6 at each edge end (q h / 3 where two edges meet) and 2 q h / 3 at the
         midpoint.
         """
+        if not self.scene.geometry.paper_shape:
+            return self._volume_line_load()
         b = self.new_vector()
         L = self.scene.geometry.length
         h = L / self.divisions[0]
@@ -191,6 +219,25 @@ class SolidModel:
         arr[3 * self.center_nodes + 2] = self.scene.load.line_load * w
         self._zero_clamped(b)
         return b
+
+    def _volume_line_load(self) -> PETSc.Vec:
+        """Any other section (SPEC section 9): the line load q as a uniform volume force
+        q / A(X) along z, A(X) the mesh's section area (the root face's area times the stretch
+        s_y s_z of :func:`fxflex.mesh.section_mesh.stretch`), so that its resultant per unit
+        length is q on the centroid axis; 1 / A interpolated in the displacement space."""
+        from fxflex.mesh.section_mesh import stretch
+
+        area0 = self.comm.allreduce(fem.assemble_scalar(fem.form(1.0 * self.ds(ROOT))))
+        R, q = self.scene.geometry.hub_radius, self.scene.load.line_load
+        density = fem.Function(fem.FunctionSpace(self.mesh, ("Lagrange", self.degree)))
+
+        def value(x):
+            sy, sz, _ = stretch(self.shape, x[0] - R)
+            return q / (area0 * sy * sz)
+
+        density.interpolate(value)
+        ez = fem.Constant(self.mesh, np.array([0.0, 0.0, 1.0]))
+        return self.vector(density * ufl.inner(ez, self.u_test) * self.dx)
 
     def tip_traction_vectors(self) -> list[PETSc.Vec]:
         """Nodal forces of a unit force (1 N) along X, Y, Z spread uniformly over the tip face."""
@@ -228,7 +275,11 @@ class SolidModel:
     # -- probe ------------------------------------------------------------------------------------
     def tip_displacement(self, array: np.ndarray) -> np.ndarray:
         """Displacement of the tip section centre from an owned-part array (3 per node), or (3, k)
-        from an (n_owned, k) array."""
+        from an (n_owned, k) array; for a section other than the paper's, the tip centroid's
+        (:meth:`_locate_tip_face`)."""
+        if not self.scene.geometry.paper_shape:
+            part = array[: self.n_owned].reshape((self.n_owned_nodes, 3) + array.shape[1:])
+            return self.comm.allreduce(np.tensordot(self.tip_weights, part, axes=(0, 0)))
         local = np.zeros((3,) + array.shape[1:], dtype=array.dtype)
         if self.tip_node is not None:
             local[:] = array[3 * self.tip_node: 3 * self.tip_node + 3]
