@@ -73,30 +73,26 @@ def _twist_per_element(scene: Scene, key: str, count: int, what: str) -> None:
                               f"section; allowed: at least {need} {what}")
 
 
-#: the methods that run on every section of SPEC section 9 (the others: the paper's only)
-ANY_SECTION = ("lebb", "nebb", "ancf", "ffrf", "gcms", "tlf")
-
-
 def validate_for(method: str, scene: Scene) -> None:
-    """What only ``method`` needs of the scene: a mesh whose elements do not degenerate and a
-    modal basis no larger than the mesh; for the methods that do not take them yet, the paper's
-    section shape (LEBB and NEBB take every section of SPEC section 9 through its 2-D analysis,
-    issue 14)."""
+    """What only ``method`` needs of the scene: a mesh whose elements do not degenerate, a modal
+    basis no larger than the mesh, and for ANCF and the solids a section that only stretches
+    along the span (their reference configuration and meshes scale the root section; a hollow
+    wall that keeps its thickness while the section tapers does not)."""
     g = scene.geometry
-    if not g.paper_shape and method not in ANY_SECTION:
-        key = ("geometry.stations" if g.stations else "geometry.wall" if g.wall
-               else "geometry.section")
-        raise SceneError(key, f"{method} runs on the paper's section only so far (a solid "
-                              f"rectangle, linear taper and twist); allowed: section = "
-                              f"\"rectangle\", wall = 0, no stations, or a method that takes "
-                              f"any section: {', '.join(ANY_SECTION)}")
+    if method in ("ancf", "ffrf", "gcms", "tlf") and g.wall_does_not_stretch():
+        raise SceneError("geometry.wall", f"{method} takes a hollow section only untapered (its "
+                                          f"reference stretches the root section along the "
+                                          f"span; a wall does not stretch with it); allowed: "
+                                          f"root and tip sizes equal and no wall in the "
+                                          f"stations, or lebb, nebb")
     if method in ("ffrf", "gcms", "tlf"):
         nx, ny, nz = scene.mesh.solid
         _twist_per_element(scene, "mesh.solid", nx, "divisions along X")
         p = scene.mesh.solid_degree             # nodal unknowns after the clamp (solid_dof_count)
         dof = 3 * p * nx * (p * ny + 1) * (p * nz + 1)
         modes = {"ffrf": scene.reduction.ffrf_modes, "gcms": scene.reduction.gcms_modes // 3}
-        if method in modes and modes[method] > dof:
+        # (the count holds for the paper's rectangle; another section's quad mesh has its own)
+        if method in modes and modes[method] > dof and g.paper_shape:
             key = "reduction.ffrf_modes" if method == "ffrf" else "reduction.gcms_modes"
             raise SceneError(key, f"needs {modes[method]} clamped modes but mesh.solid "
                                   f"{list(scene.mesh.solid)} has {dof} unknowns; allowed: at "
@@ -104,23 +100,6 @@ def validate_for(method: str, scene: Scene) -> None:
     if method == "ancf":
         _twist_per_element(scene, "mesh.beam_elements", scene.mesh.beam_elements,
                            "ANCF elements")
-        # ANCF's reference configuration stretches the root section (Eq. 52: section gradients
-        # scaled by the sizes): a wall that keeps its thickness while the section tapers is not a
-        # stretch of the root section
-        tapered = bool(g.stations) or (g.root_y, g.root_z) != (g.tip_y, g.tip_z)
-        if g.wall > 0 and tapered or (g.stations and _stations_wall(g)):
-            raise SceneError("geometry.wall", "ancf takes a hollow section only untapered (its "
-                                              "reference stretches the root section along the "
-                                              "span; a wall does not stretch with it); allowed: "
-                                              "root and tip sizes equal and no stations, or "
-                                              "lebb, nebb")
-
-
-def _stations_wall(g) -> bool:
-    """Whether the stations table gives a wall anywhere (a column of zeros is a solid section)."""
-    from fxflex.section.blade import read_stations
-
-    return any(v > 0 for v in read_stations(g.stations, g.length)[:, 4])
 
 
 def _read_toml(path: str | os.PathLike) -> dict:

@@ -50,6 +50,22 @@ class Geometry:
     def __post_init__(self) -> None:
         check_section(self, "geometry")
 
+    def wall_does_not_stretch(self) -> bool:
+        """A hollow wall that keeps its thickness while the section tapers (or a stations table
+        with a wall anywhere): not a stretch of the root section, which ANCF's reference and the
+        solid meshes need."""
+        if self.stations:
+            from fxflex.section.blade import read_stations
+
+            t = read_stations(self.stations, self.length)
+            walls = t[:, 4] if not all(w != w for w in t[:, 4]) else [self.wall] * len(t)
+            sizes = {(float(a), float(b)) for a, b in t[:, 1:3]}
+            return any(w > 0 for w in walls) and (len(sizes) > 1 or len(set(walls)) > 1)
+        # naca4: the thickness follows the chord, the Z keys do not count
+        root = (self.root_y,) if self.section == "naca4" else (self.root_y, self.root_z)
+        tip = (self.tip_y,) if self.section == "naca4" else (self.tip_y, self.tip_z)
+        return self.wall > 0 and root != tip
+
     @property
     def paper_shape(self) -> bool:
         """The paper's solid rectangle, tapered and twisted linearly (SPEC section 1)."""

@@ -96,17 +96,6 @@ def test_naca_keys():
         _scene("geometry.section=circle")
 
 
-@pytest.mark.parametrize("method", ["ffrf", "tlf"])
-def test_methods_refuse_other_sections(method):
-    """The methods that do not take them yet refuse a non-paper section with one line naming
-    the key (not run on the rectangle's properties); the beams take them
-    (tests/section/test_beams_any_section.py)."""
-    from fxflex.formulation import build
-
-    with pytest.raises(SceneError, match="geometry.section: .*paper's section only"):
-        build(method, _scene("geometry.section=ellipse"), None)
-
-
 def _cli(*args):
     return subprocess.run([sys.executable, "-m", "fxflex", "section", *args],
                           capture_output=True, text=True, timeout=300)

@@ -220,7 +220,12 @@ def test_q2_campbell_keeps_the_papers_verdicts():
     inplane = [m.frequencies_hz[m.labels.index("in-plane")] for m in tlf_data.modes]
     assert inplane[0] < inplane[1] < inplane[2]
     at = build("tlf", s.replace(**{"rotation.rpm": 5000.0}), COMM)
-    assert np.array_equal(modes_of(at, 3).frequencies_hz, tlf_data.modes[1].frequencies_hz)
+    # the same problem solved twice: equal to SLEPc's PEP tolerance (relative residual
+    # PEP_STABILITY_RTOL; a distributed MUMPS factorisation need not repeat to the bit)
+    from fxflex.solid.tlf import PEP_STABILITY_RTOL
+
+    np.testing.assert_allclose(modes_of(at, 3).frequencies_hz, tlf_data.modes[1].frequencies_hz,
+                               rtol=PEP_STABILITY_RTOL)
 
 
 # -- root stress -----------------------------------------------------------------------------------
