@@ -62,10 +62,18 @@ class Modes:
     def growth_rates(self) -> np.ndarray:
         return self.eigenvalues.real
 
+    @property
+    def damping_ratios(self) -> np.ndarray:
+        """-Re lambda / |lambda| per mode (SPEC section 10; 0 for a root at the origin)."""
+        mod = np.abs(self.eigenvalues)
+        return np.where(mod > 0, -self.eigenvalues.real / np.where(mod > 0, mod, 1.0), 0.0)
+
     def to_dict(self) -> dict:
-        """The SPEC section 8 fields: equal-length lists, one entry per conjugate pair."""
+        """The SPEC section 8 fields, and section 10's damping ratios: equal-length lists, one
+        entry per conjugate pair."""
         return {"rpm": self.rpm, "frequencies_hz": self.frequencies_hz.tolist(),
-                "growth_rates": self.growth_rates.tolist(), "labels": list(self.labels),
+                "growth_rates": self.growth_rates.tolist(),
+                "damping_ratios": self.damping_ratios.tolist(), "labels": list(self.labels),
                 "stable": self.stable, "warnings": list(self.warnings)}
 
 

@@ -230,3 +230,17 @@ def test_tlf_pep_against_dense_solve(mass, model):
         assert abs(np.vdot(a, b)) == pytest.approx(np.linalg.norm(a) * np.linalg.norm(b),
                                                    rel=1e-7)
     assert set(modes_of(form, 6).labels) <= set(LABELS)
+
+
+def test_damping_ratios_are_minus_re_over_modulus():
+    """SPEC section 10: ``damping_ratios`` = -Re lambda / |lambda| per mode; with the relative
+    damping every mode of the rotating beam decays at about Re lambda = -c / (2 rho)
+    (docs/stability.md), so the ratio is about c / (2 rho |lambda|)."""
+    scene = load_scene(overrides=["rotation.rpm=1000"])
+    m = modes_of(build("lebb", scene, None), 4)
+    lam = m.eigenvalues
+    assert m.damping_ratios == pytest.approx(-lam.real / np.abs(lam), rel=1e-14)
+    sigma = scene.damping.c / (2 * scene.material.rho)
+    assert m.damping_ratios == pytest.approx(sigma / np.abs(lam), rel=0.05)
+    d = m.to_dict()
+    assert len(d["damping_ratios"]) == len(d["frequencies_hz"]) == 4
