@@ -65,8 +65,8 @@ class Modes:
     @property
     def damping_ratios(self) -> np.ndarray:
         """-Re lambda / |lambda| per mode (SPEC section 10; 0 for a root at the origin)."""
-        mod = np.abs(self.eigenvalues)
-        return np.where(mod > 0, -self.eigenvalues.real / np.where(mod > 0, mod, 1.0), 0.0)
+        from fxflex.numerics.qep import damping_ratios
+        return damping_ratios(self.eigenvalues)
 
     def to_dict(self) -> dict:
         """The SPEC section 8 fields, and section 10's damping ratios: equal-length lists, one

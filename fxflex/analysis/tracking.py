@@ -95,9 +95,8 @@ class Branch:
     @property
     def damping_ratios(self) -> np.ndarray:
         """-Re lambda / |lambda| (0 for a zero root)."""
-        mod = np.abs(self.eigenvalues)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(mod > 0, -self.eigenvalues.real / np.where(mod > 0, mod, 1.0), 0.0)
+        from fxflex.numerics.qep import damping_ratios
+        return damping_ratios(self.eigenvalues)
 
     def to_dict(self) -> dict:
         """The SPEC section 10 fields of a branch, and its tip direction per speed."""

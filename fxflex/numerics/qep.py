@@ -30,6 +30,7 @@ import numpy as np
 import scipy.linalg as la
 
 __all__ = ["companion", "companion_eigenvalues", "quadratic_eigen", "conjugate_pairs",
+           "damping_ratios",
            "rightmost", "growth_rate", "unstable", "root_errors", "STABILITY_RTOL",
            "TROPICAL_TAU", "DenseLinearisation", "EigenNotConverged", "verdict"]
 
@@ -158,6 +159,14 @@ def quadratic_eigen(M: np.ndarray, C: np.ndarray, K: np.ndarray
     displacement part of the companion eigenvectors (tropically scaled when heavily damped)."""
     lam, X, _ = _eigen_lr(M, C, K)
     return lam, X
+
+
+def damping_ratios(lam: np.ndarray) -> np.ndarray:
+    """-Re lambda / |lambda| of each root (0 for a root at the origin, NaN for a NaN root)."""
+    lam = np.asarray(lam)
+    mod = np.abs(lam)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(mod > 0, -lam.real / np.where(mod > 0, mod, 1.0), 0.0)
 
 
 def conjugate_pairs(lam: np.ndarray) -> np.ndarray:
