@@ -34,6 +34,7 @@ def dof_count(method: str, scene: Scene) -> int | None:
             return None
         raise
     count = getattr(module, "dof_count", None)
-    if method in ("ffrf", "gcms", "tlf") and not scene.geometry.paper_shape:
+    if method in ("ffrf", "gcms", "tlf") and (not scene.geometry.paper_shape
+                                              or scene.mesh.solid_file):
         return None                 # another section's quad mesh: known once it is meshed
     return count(scene) if count is not None else None

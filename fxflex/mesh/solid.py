@@ -45,8 +45,10 @@ class SolidMesh:
     shape: BeamShape
     divisions: tuple[int, int, int]
     order: int              # geometry degree: 1 (8-node hexahedra) or 2 (27-node)
-    path: Path | None       # the cached .msh file
+    path: Path | None       # the cached .msh file (or the user's, mesh.solid_file)
     generated: bool         # False when read from the cache
+    kind: str = "hexahedra"     # or "tetrahedra" (mesh.solid_file only)
+    key: str | None = None      # what the cache keys of results on this mesh use
 
 
 def mesh_key(geometry: Geometry, divisions, order: int = 1) -> str:
@@ -147,4 +149,5 @@ def build_solid_mesh(geometry: Geometry, divisions, comm, *, use_cache: bool = T
         gmsh.finalize()
     generated, use_cache = comm.bcast((generated, use_cache), root=0)
     return SolidMesh(mesh=mesh, cell_tags=cell_tags, facet_tags=facet_tags, shape=shape,
-                     divisions=divisions, order=order, path=path if use_cache else None, generated=generated)
+                     divisions=divisions, order=order, path=path if use_cache else None,
+                     generated=generated, key=mesh_key(geometry, divisions, order))

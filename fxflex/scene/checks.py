@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import os
 import numbers
 import typing
 from collections.abc import Mapping
@@ -195,6 +196,9 @@ def _mesh(mesh) -> None:
         raise SceneError("mesh.solid", f"got {shown(list(mesh.solid))}: Y and Z divisions must be "
                                        "even (the centerline is a line of nodes); allowed: even "
                                        "Y and Z divisions")
+    if mesh.solid_file and not os.path.isfile(mesh.solid_file):
+        raise SceneError("mesh.solid_file", f"{shown(mesh.solid_file)} is not a file; allowed: a "
+                                            "gmsh .msh file (hexahedra or tetrahedra)")
 
 
 _RELATIONS = {"geometry": _geometry, "material": _material, "rotation": _rotation,

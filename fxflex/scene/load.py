@@ -85,6 +85,12 @@ def validate_for(method: str, scene: Scene) -> None:
                                           f"span; a wall does not stretch with it); allowed: "
                                           f"root and tip sizes equal and no wall in the "
                                           f"stations, or lebb, nebb")
+    if scene.mesh.solid_file:
+        if method not in ("ffrf", "gcms", "tlf"):
+            raise SceneError("mesh.solid_file", f"{method} is a beam method and takes its body "
+                                                f"from [geometry], not a solid mesh; allowed: "
+                                                f"ffrf, gcms, tlf, or no mesh.solid_file")
+        return                          # the file's own mesh (mesh.imported checks it)
     if method in ("ffrf", "gcms", "tlf"):
         nx, ny, nz = scene.mesh.solid
         _twist_per_element(scene, "mesh.solid", nx, "divisions along X")

@@ -27,7 +27,7 @@ PAPER_RPM = (1000.0, 5000.0, 10000.0)
 #: keys beyond the paper's scene (SPEC sections 9-10): in the scene hash only when not at their
 #: defaults (Scene.hash)
 LATER_KEYS = ("mesh.solid_degree", "mesh.beam_variant", "geometry.section", "geometry.airfoil",
-              "geometry.contour", "geometry.wall", "geometry.stations")
+              "geometry.contour", "geometry.wall", "geometry.stations", "mesh.solid_file")
 PAPER_DAMPING = (100.0, 500.0, 1000.0)
 
 
@@ -159,6 +159,7 @@ class MeshSpec:
     ancf_root: str = "free-axial"
     solid_degree: int = 1           # 1: trilinear hexahedra (the paper's); 2: 27-node (SPEC 9)
     beam_variant: str = "paper"     # "paper" (Eq. 45-57) or "locking-free" (NEBB, ANCF; SPEC 9)
+    solid_file: str = ""            # the user's gmsh .msh for FFRF, GCMS, TLF (SPEC 9)
 
     def __post_init__(self) -> None:
         check_section(self, "mesh")

@@ -79,10 +79,8 @@ def modes_key(model: SolidModel, count: int, tol: float) -> str:
     """Cache key of the ``count`` clamped modes of ``model`` (module docstring)."""
     from dataclasses import asdict
 
-    from fxflex.mesh.solid import mesh_key
-
     return cache.entry_key({
-        "kind": "modes", "mesh": mesh_key(model.scene.geometry, model.divisions, model.degree),
+        "kind": "modes", "mesh": model.solid_mesh.key,
         **({"degree": model.degree} if model.degree != 1 else {}),
         "material": asdict(model.scene.material), "quadrature": model.quadrature_degree,
         "count": int(count), "tol": float(tol), "code": cache.code_version(*CODE_MODULES)})

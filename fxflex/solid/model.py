@@ -50,7 +50,13 @@ class SolidModel:
         degree = scene.mesh.solid_degree if degree is None else int(degree)
         self.degree = degree
         quadrature_degree = 2 * degree if quadrature_degree is None else quadrature_degree
-        sm = build_solid_mesh(scene.geometry, self.divisions, comm, order=degree)
+        if scene.mesh.solid_file:
+            from fxflex.mesh.imported import read_solid_file
+            sm = read_solid_file(scene, comm)
+        else:
+            sm = build_solid_mesh(scene.geometry, self.divisions, comm, order=degree)
+        # the paper's mesh: centerline nodes carry the line load and the tip probe (SPEC 1, 9)
+        self.paper_mesh = scene.geometry.paper_shape and not scene.mesh.solid_file
         self.solid_mesh, self.mesh, self.shape = sm, sm.mesh, sm.shape
         self.timings = {"mesh": time.perf_counter() - t0}
         self.quadrature_degree = quadrature_degree
@@ -81,7 +87,7 @@ class SolidModel:
     # -- geometry --------------------------------------------------------------------------------
     def _locate_centerline(self) -> None:
         g = self.scene.geometry
-        if not g.paper_shape:
+        if not self.paper_mesh:
             self._locate_tip_face()
             return
         tol = 1e-9 * g.length
@@ -201,7 +207,7 @@ class SolidModel:
         two ends; Q2 q h / 6 at each edge end (q h / 3 where two edges meet) and 2 q h / 3 at the
         midpoint.
         """
-        if not self.scene.geometry.paper_shape:
+        if not self.paper_mesh:
             return self._volume_line_load()
         b = self.new_vector()
         L = self.scene.geometry.length
@@ -277,7 +283,7 @@ class SolidModel:
         """Displacement of the tip section centre from an owned-part array (3 per node), or (3, k)
         from an (n_owned, k) array; for a section other than the paper's, the tip centroid's
         (:meth:`_locate_tip_face`)."""
-        if not self.scene.geometry.paper_shape:
+        if not self.paper_mesh:
             part = array[: self.n_owned].reshape((self.n_owned_nodes, 3) + array.shape[1:])
             return self.comm.allreduce(np.tensordot(self.tip_weights, part, axes=(0, 0)))
         local = np.zeros((3,) + array.shape[1:], dtype=array.dtype)
