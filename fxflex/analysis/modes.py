@@ -240,7 +240,7 @@ def campbell(build_at, speeds, pairs: int, progress=None) -> list[Modes]:
 def sample_of(form, pairs: int, extra: int | None = None, requested: bool = True):
     """The :class:`~fxflex.analysis.tracking.Sample` at the formulation's speed: the ``pairs``
     reported modes (:func:`modes_of`) and ``pairs + extra`` candidates (default EXTRA_MODES)
-    with their mass products. Collective for TLF. The candidates are solved first: the
+    with their mass products and labels (the largest participation, as the reported modes'). Collective for TLF. The candidates are solved first: the
     reported modes are the lowest of them (the formulation keeps its eigensolve)."""
     from fxflex.analysis.tracking import EXTRA_MODES, Sample, mass_times
     from fxflex.numerics.qep import EigenNotConverged
@@ -255,7 +255,7 @@ def sample_of(form, pairs: int, extra: int | None = None, requested: bool = True
             lam, X = lam[:0], np.zeros((0, 0), dtype=complex)
     modes = modes_of(form, pairs)
     if lam.size:
-        labels = direction_labels(form.mode_tip(X), tip_radius(form.scene))
+        labels = mode_shapes(form.scene, *form.mode_span(X)).labels
         MX = mass_times(form, X)
     else:
         labels, MX = [], X
@@ -421,7 +421,7 @@ def _write_campbell(data: CampbellData, out_dir: str, payload: dict, tracking=No
 
 def tracking_lines(tracking) -> list[str]:
     """The text of the tracked branches: per branch its frequencies at the ends, lowest MAC and
-    where its tip direction changes family (a veering); then the resonance speeds."""
+    where its family (largest participation) changes (a veering); then the resonance speeds."""
     lines = [f"  branches tracked by MAC over {tracking.rpm.size} speeds "
              f"({tracking.refined} added by refinement where a MAC fell below "
              f"{tracking.threshold:g}):"]
@@ -430,7 +430,7 @@ def tracking_lines(tracking) -> list[str]:
         mac = np.nanmin(b.mac) if np.isfinite(b.mac).any() else float("nan")
         change = [i for i in range(1, len(b.directions))
                   if b.directions[i] and b.directions[i] != b.directions[i - 1]]
-        turn = "; tip " + ", ".join(f"{b.directions[i]} from {tracking.rpm[i]:g} rpm"
+        turn = "; now " + ", ".join(f"{b.directions[i]} from {tracking.rpm[i]:g} rpm"
                                     for i in change) if change else ""
         lines.append(f"    {b.label:<20s} {f[0]:9.2f} -> {f[-1]:9.2f} Hz, lowest MAC "
                      f"{mac:.3f}{turn}")
