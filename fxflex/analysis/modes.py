@@ -240,8 +240,9 @@ def campbell(build_at, speeds, pairs: int, progress=None) -> list[Modes]:
 def sample_of(form, pairs: int, extra: int | None = None, requested: bool = True):
     """The :class:`~fxflex.analysis.tracking.Sample` at the formulation's speed: the ``pairs``
     reported modes (:func:`modes_of`) and ``pairs + extra`` candidates (default EXTRA_MODES)
-    with their mass products and labels (the largest participation, as the reported modes'). Collective for TLF. The candidates are solved first: the
-    reported modes are the lowest of them (the formulation keeps its eigensolve)."""
+    with their mass products and labels (the largest participation, as the reported modes').
+    Collective for TLF. The candidates are solved first: the reported modes are the lowest of
+    them (the formulation keeps its eigensolve)."""
     from fxflex.analysis.tracking import EXTRA_MODES, Sample, mass_times
     from fxflex.numerics.qep import EigenNotConverged
 
