@@ -205,6 +205,12 @@ class RotatingAnalysis(Protocol):
     def mode_tip(self, X: np.ndarray) -> np.ndarray:
         """(6, k) tip-section translation and rotation of mode vectors (O-XYZ)."""
 
+    def mode_span(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x, S) of mode vectors: x (s,) span stations in m from the root (the beam nodes, the
+        solids' node layers) and S (4, s, k) the section centroid's translation X, Y, Z and the
+        section rotation about X there (O-XYZ; SPEC section 10). Same on every rank
+        (collective for TLF)."""
+
     def eigenvalues(self, steady: SteadyState | None = None) -> np.ndarray:
         """The roots the verdict is decided on."""
 

@@ -5,16 +5,18 @@ Each formulation offers ``rotating_modes(pairs)`` -> the lowest roots lambda of
 companion form for the reduced and beam models, :mod:`fxflex.numerics.qep`; SLEPc PEP for TLF,
 :mod:`fxflex.numerics.petsc`), and ``mode_tip(X)`` -> the tip section's translation and rotation in
 each mode. From them: the frequency |Im lambda| / 2 pi (0 for a real root), the growth rate
-Re lambda and a direction label
+Re lambda, and from ``mode_span(X)`` the mode shapes along the span and their participation
+(:mod:`fxflex.analysis.shapes`, SPEC section 10): the fractions of each mode's kinetic energy in
 
-- ``axial``: the tip moves mostly along X,
-- ``in-plane``: along Y (in the plane of rotation),
-- ``out-of-plane``: along Z (the rotation axis, the load direction),
-- ``torsion``: the section turns about X,
+- ``axial`` motion (along X),
+- ``in-plane`` (along Y, in the plane of rotation),
+- ``out-of-plane`` (along Z, the rotation axis, the load direction),
+- ``torsion`` (the sections turning about X),
 
-whichever of |U_X|, |U_Y|, |U_Z| and r |theta_X| is largest, r the polar radius of gyration
-sqrt((b^2 + h^2) / 12) of the tip section (the mean displacement of the section's points when it
-turns by theta_X). Mode vectors are complex (gyroscopic coupling); the moduli compare amplitudes.
+and its label, the family with the largest fraction. Mode vectors are complex (gyroscopic
+coupling). The tracker of ``--campbell`` still names a candidate by its tip
+(:func:`direction_labels`: whichever of |U_X|, |U_Y|, |U_Z| and r |theta_X| is largest, r the
+polar radius of gyration sqrt((b^2 + h^2) / 12) of the tip section).
 
 A Campbell diagram repeats this over a range of speeds (:func:`campbell`); ``fxflex modes
 --campbell`` follows each mode from speed to speed by MAC (:func:`campbell_tracked`,
@@ -33,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fxflex.analysis.shapes import Shapes, mode_shapes
 from fxflex.scene import Scene
 
 __all__ = ["LABELS", "Modes", "direction_labels", "tip_radius", "modes_of", "speed_builder",
@@ -53,6 +56,12 @@ class Modes:
     stable: bool | None             # the formulation's verdict (stable()); None: undecided
     seconds: float = 0.0
     warnings: list[str] = dataclasses.field(default_factory=list)
+    shapes: Shapes | None = None    # along the span, with the participation (SPEC section 10)
+
+    @property
+    def participation(self) -> list[dict[str, float]]:
+        """Per mode the kinetic-energy fractions axial, in-plane, out-of-plane, torsion."""
+        return self.shapes.participation if self.shapes is not None else []
 
     @property
     def frequencies_hz(self) -> np.ndarray:
@@ -69,11 +78,13 @@ class Modes:
         return damping_ratios(self.eigenvalues)
 
     def to_dict(self) -> dict:
-        """The SPEC section 8 fields, and section 10's damping ratios: equal-length lists, one
-        entry per conjugate pair."""
+        """The SPEC section 8 fields, and section 10's damping ratios, participation and
+        shapes: equal-length lists, one entry per conjugate pair."""
+        shapes = self.shapes.to_dict() if self.shapes is not None else {"x": [], "modes": []}
         return {"rpm": self.rpm, "frequencies_hz": self.frequencies_hz.tolist(),
                 "growth_rates": self.growth_rates.tolist(),
                 "damping_ratios": self.damping_ratios.tolist(), "labels": list(self.labels),
+                "participation": self.participation, "shapes": shapes,
                 "stable": self.stable, "warnings": list(self.warnings)}
 
 
@@ -114,12 +125,18 @@ def modes_of(form, pairs: int) -> Modes:
                             f"(one per conjugate pair of the roots of its {form.dof} unknowns); "
                             f"all {lam.size} are reported")
     tip = form.mode_tip(X) if lam.size else np.zeros((6, 0), dtype=complex)
-    labels = direction_labels(tip, tip_radius(form.scene))
+    if lam.size:
+        x, S = form.mode_span(X)
+        shapes = mode_shapes(form.scene, x, S)
+        labels = shapes.labels
+    else:
+        shapes, labels = None, []
     stable, why = verdict(form)
     if why is not None and converged:
         warnings.append(why)
     return Modes(rpm=form.scene.rotation.rpm, eigenvalues=lam, tip=tip, labels=labels,
-                 stable=stable, seconds=time.perf_counter() - t0, warnings=warnings)
+                 stable=stable, seconds=time.perf_counter() - t0, warnings=warnings,
+                 shapes=shapes)
 
 
 def speed_builder(method: str, scene: Scene, comm, options=None):
@@ -223,8 +240,9 @@ def campbell(build_at, speeds, pairs: int, progress=None) -> list[Modes]:
 def sample_of(form, pairs: int, extra: int | None = None, requested: bool = True):
     """The :class:`~fxflex.analysis.tracking.Sample` at the formulation's speed: the ``pairs``
     reported modes (:func:`modes_of`) and ``pairs + extra`` candidates (default EXTRA_MODES)
-    with their mass products. Collective for TLF. The candidates are solved first: the
-    reported modes are the lowest of them (the formulation keeps its eigensolve)."""
+    with their mass products and labels (the largest participation, as the reported modes').
+    Collective for TLF. The candidates are solved first: the reported modes are the lowest of
+    them (the formulation keeps its eigensolve)."""
     from fxflex.analysis.tracking import EXTRA_MODES, Sample, mass_times
     from fxflex.numerics.qep import EigenNotConverged
 
@@ -238,7 +256,7 @@ def sample_of(form, pairs: int, extra: int | None = None, requested: bool = True
             lam, X = lam[:0], np.zeros((0, 0), dtype=complex)
     modes = modes_of(form, pairs)
     if lam.size:
-        labels = direction_labels(form.mode_tip(X), tip_radius(form.scene))
+        labels = mode_shapes(form.scene, *form.mode_span(X)).labels
         MX = mass_times(form, X)
     else:
         labels, MX = [], X
@@ -358,9 +376,14 @@ def _plot_branches(ax, tracking) -> float:
 # -- the ``fxflex modes`` command -------------------------------------------------------------------
 
 def modes_table(modes: Modes) -> list[str]:
-    lines = ["   #  frequency (Hz)  growth rate (1/s)  direction"]
-    for i, (f, g, lab) in enumerate(zip(modes.frequencies_hz, modes.growth_rates, modes.labels)):
-        lines.append(f"  {i + 1:2d}  {f:14.4f}  {g:+17.6g}  {lab}")
+    """One line per mode: frequency, growth rate, label and the participation (axial, in-plane,
+    out-of-plane, torsion fractions of the kinetic energy, SPEC section 10)."""
+    lines = ["   #  frequency (Hz)  growth rate (1/s)  direction      participation X/Y/Z/T"]
+    part = modes.participation or [None] * len(modes.labels)
+    for i, (f, g, lab, p) in enumerate(zip(modes.frequencies_hz, modes.growth_rates,
+                                           modes.labels, part)):
+        frac = "" if p is None else " ".join(f"{p[k]:.3f}" for k in LABELS)
+        lines.append(f"  {i + 1:2d}  {f:14.4f}  {g:+17.6g}  {lab:<13s}  {frac}")
     return lines
 
 
@@ -399,7 +422,7 @@ def _write_campbell(data: CampbellData, out_dir: str, payload: dict, tracking=No
 
 def tracking_lines(tracking) -> list[str]:
     """The text of the tracked branches: per branch its frequencies at the ends, lowest MAC and
-    where its tip direction changes family (a veering); then the resonance speeds."""
+    where its family (largest participation) changes (a veering); then the resonance speeds."""
     lines = [f"  branches tracked by MAC over {tracking.rpm.size} speeds "
              f"({tracking.refined} added by refinement where a MAC fell below "
              f"{tracking.threshold:g}):"]
@@ -408,7 +431,7 @@ def tracking_lines(tracking) -> list[str]:
         mac = np.nanmin(b.mac) if np.isfinite(b.mac).any() else float("nan")
         change = [i for i in range(1, len(b.directions))
                   if b.directions[i] and b.directions[i] != b.directions[i - 1]]
-        turn = "; tip " + ", ".join(f"{b.directions[i]} from {tracking.rpm[i]:g} rpm"
+        turn = "; now " + ", ".join(f"{b.directions[i]} from {tracking.rpm[i]:g} rpm"
                                     for i in change) if change else ""
         lines.append(f"    {b.label:<20s} {f[0]:9.2f} -> {f[-1]:9.2f} Hz, lowest MAC "
                      f"{mac:.3f}{turn}")
@@ -469,11 +492,20 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
         _log_warnings(comm, modes.warnings)
         if out_dir is not None and comm.rank == 0:
             import json
+
+            from fxflex.analysis.shapes import plot_shapes, write_shapes_csv
             os.makedirs(out_dir, exist_ok=True)
             path = os.path.join(out_dir, f"modes_{method}.json")
             with open(path, "w") as fh:
                 json.dump(payload, fh, indent=1)
             text.append(f"  written: {path}")
+            if modes.shapes is not None:
+                stem = os.path.join(out_dir, f"shapes_{method}")
+                write_shapes_csv(modes.shapes, stem + ".csv")
+                plot_shapes(modes.shapes, stem + ".png", modes.frequencies_hz,
+                            f"{method.upper()} mode shapes at {scene.rotation.rpm:g} rpm "
+                            f"(largest translation 1)")
+                text.append(f"  written: {stem}.csv, {stem}.png")
         return payload, "\n".join(text)
 
     done = []

@@ -20,12 +20,12 @@ branch (the decaying one costs :data:`DECAYING_REAL` more), as the plot has alwa
 
 Where a branch's MAC to the previous speed is below ``threshold`` (0.9) the interval is bisected,
 up to ``levels`` times; a MAC still below it after that is reported (``low_mac``) and marked in the
-PNG. Each branch carries the family of its mode at the first speed (the tip direction,
-:func:`fxflex.analysis.modes.direction_labels`) and an ordinal label by frequency at the first
+PNG. Each branch carries the family of its mode at the first speed (the largest participation,
+:mod:`fxflex.analysis.shapes`) and an ordinal label by frequency at the first
 speed within its family ("1st out-of-plane", "2nd in-plane", ...). Note that a branch keeps its
 identity by continuity of shape, not of family: through a veering (an avoided crossing of two
 coupled modes, e.g. flap 1 and edge 1 of the twisted default blade at 5000-7000 rpm) the shapes
-exchange gradually along each branch, so a branch's tip direction can end in another family
+exchange gradually along each branch, so a branch's family can end in another family
 (``directions``); where the modes truly cross (uncoupled, the untwisted blade) each branch keeps
 its shape and family while the sorted order swaps them.
 
@@ -68,7 +68,7 @@ class Sample:
     lam: np.ndarray
     X: np.ndarray
     MX: np.ndarray
-    labels: list[str]               # tip direction of each candidate
+    labels: list[str]               # family of each candidate (largest participation)
     comm: object | None             # communicator to sum products over (None: replicated rows)
     requested: bool = True          # a speed asked for, not one added by refinement
 
@@ -82,7 +82,7 @@ class Branch:
     index: np.ndarray               # (s,) candidate index at each speed (-1: none)
     eigenvalues: np.ndarray         # (s,) complex (NaN where none)
     mac: np.ndarray                 # (s,) MAC to the previous speed, the first 1
-    directions: list[str]           # tip direction at each speed
+    directions: list[str]           # family at each speed (largest participation)
 
     @property
     def frequencies_hz(self) -> np.ndarray:
@@ -99,7 +99,7 @@ class Branch:
         return damping_ratios(self.eigenvalues)
 
     def to_dict(self) -> dict:
-        """The SPEC section 10 fields of a branch, and its tip direction per speed."""
+        """The SPEC section 10 fields of a branch, and its family per speed."""
         return {"label": self.label, "family": self.family,
                 "frequencies_hz": self.frequencies_hz.tolist(),
                 "growth_rates": self.growth_rates.tolist(),

@@ -382,6 +382,22 @@ class ANCF(FormulationBase):
         out[5] = tip[1, 1]
         return out
 
+    def mode_span(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x, S) of rotating-frame mode vectors X (free coordinates, k columns): the nodes'
+        distances from the root (s,) and S (4, s, k) each node's position change r (the
+        centerline, on the section centroid) and theta_X from its section gradients as in
+        :meth:`mode_tip`; the prescribed root coordinates are zero (SPEC section 10)."""
+        X2 = X.reshape(X.shape[0], -1)
+        full = np.zeros((self.n_full, X2.shape[1]), dtype=X.dtype)
+        full[self.free_dofs] = X2
+        nodes = full.reshape(-1, SLOTS, 3, X2.shape[1])
+        d = self.e0n                                          # (n_nodes, SLOTS, 3)
+        S = np.empty((4, nodes.shape[0], X2.shape[1]), dtype=X.dtype)
+        S[:3] = nodes[:, 0].transpose(1, 0, 2)
+        S[3] = 0.5 * sum((d[:, k, 1, None] * nodes[:, k, 2] - d[:, k, 2, None] * nodes[:, k, 1])
+                         / np.einsum("ni,ni->n", d[:, k], d[:, k])[:, None] for k in (2, 3))
+        return self.line.x_nodes.copy(), S
+
     def omega_max(self) -> float:
         """Highest circular frequency of the clamped beam at rest (K_L, M on the free
         coordinates): the central-difference limit is dt < 2 / omega_max."""

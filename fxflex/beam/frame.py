@@ -405,6 +405,15 @@ class FloatingFrameBeam(FormulationBase):
         W_X, W_Y, W_Z, theta_X, theta_Y, theta_Z (O-XYZ)."""
         return X[-6:]
 
+    def mode_span(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x, S) of mode vectors X (dof, k): the nodes' distances from the root (s,) and
+        S (4, s, k) their W_X, W_Y, W_Z, theta_X (O-XYZ; the section centroid lies on the
+        reference line, SPEC section 9), zero at the clamped root (SPEC section 10)."""
+        X2 = X.reshape(X.shape[0], -1)
+        S = np.zeros((4, self.line.n_nodes, X2.shape[1]), dtype=X.dtype)
+        S[:, 1:] = X2.reshape(self.line.n_el, 6, -1)[:, :4].transpose(1, 0, 2)
+        return self.line.x_nodes.copy(), S
+
     def omega_max(self) -> float:
         """Highest circular frequency of the clamped beam at rest, sqrt(max eig(K_L, M))."""
         if self._omega_max is None:

@@ -14,6 +14,7 @@ q / A(X) along z and the tip probe the area-weighted mean displacement of the ti
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -314,6 +315,68 @@ class SolidModel:
         theta = inertia_inv @ (moment - np.cross(r_sum[:, None], centre, axis=0))
         out = np.vstack([centre, theta])
         return out if X.ndim == 2 else out[:, 0]
+
+    def span_sections(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x, S) for the columns of owned-entry arrays X (n_owned, k), real or complex: x (s,)
+        the node layers' distances from the root and S (4, s, k) the translation X, Y, Z of
+        each layer's section centroid and its rotation about X (SPEC section 10).
+
+        :meth:`tip_section` generalised to every layer: the least-squares rigid fit
+        u_i ~ t + theta x r_i over the layer's nodes, r_i = X_i - c with c the centroid on the
+        X axis (SPEC section 9), i.e. the 6 x 6 normal equations sum_i A_i^T A_i (t, theta) =
+        sum_i A_i^T u_i with A_i = [1, -[r_i]x]. A layer is the nodes that share an X (to
+        1e-6 of the length); layers whose nodes cannot fix a rigid motion (fewer than three
+        off one line: an imported tetrahedral mesh between its root and tip planes) are left
+        out. The fit is one sparse (6 s, n_owned) operator per rank, built on the first call;
+        the products are summed over the ranks, so every rank gets the same result.
+        Collective on ``comm``."""
+        x, op = self._span_fit
+        X2 = X.reshape(X.shape[0], -1)
+        local = np.asarray(op @ X2) if X2.shape[0] else np.zeros((op.shape[0], X2.shape[1]),
+                                                                  dtype=X2.dtype)
+        S = self.comm.allreduce(local).reshape(x.size, 6, X2.shape[1])[:, :4]
+        S = S.transpose(1, 0, 2)
+        return x, (S if X.ndim == 2 else S[..., 0])
+
+    @functools.cached_property
+    def _span_fit(self):
+        """(x, the sparse (6 s, n_owned) fit operator of :meth:`span_sections`). Collective."""
+        from scipy import sparse
+
+        g = self.scene.geometry
+        tol = 1e-6 * g.length
+        coords = self.node_coordinates()
+        keys = np.rint((coords[:, 0] - g.hub_radius) / tol).astype(np.int64)
+        layers = np.unique(np.concatenate(self.comm.allgather(np.unique(keys))))
+        which = np.searchsorted(layers, keys)
+        r = coords - np.column_stack([coords[:, 0], np.zeros((len(coords), 2))])
+        # A_i = [I, -[r_i]x]: (n, 3, 6)
+        A = np.zeros((len(coords), 3, 6))
+        A[:, :, :3] = np.eye(3)
+        A[:, 0, 4], A[:, 0, 5] = r[:, 2], -r[:, 1]
+        A[:, 1, 3], A[:, 1, 5] = -r[:, 2], r[:, 0]
+        A[:, 2, 3], A[:, 2, 4] = r[:, 1], -r[:, 0]
+        normal = np.zeros((layers.size, 6, 6))
+        np.add.at(normal, which, np.einsum("nci,ncj->nij", A, A))
+        normal = self.comm.allreduce(normal)
+        keep = np.zeros(layers.size, dtype=bool)
+        inverse = np.zeros_like(normal)
+        for j, N in enumerate(normal):
+            ev = np.linalg.eigvalsh(N)
+            if ev[0] > 1e-9 * ev[-1]:
+                keep[j] = True
+                inverse[j] = np.linalg.inv(N)
+        index = np.cumsum(keep) - 1
+        mine = keep[which]
+        # rows 6 index(layer) + a, columns 3 node + c, values (N^-1 A_i^T)[a, c]
+        block = np.einsum("nab,ncb->nac", inverse[which[mine]], A[mine])
+        nodes = np.flatnonzero(mine)
+        rows = (6 * index[which[mine]])[:, None, None] + np.arange(6)[None, :, None]
+        cols = (3 * nodes)[:, None, None] + np.arange(3)[None, None, :]
+        rows, cols = np.broadcast_arrays(rows, cols)
+        op = sparse.csr_matrix((block.ravel(), (rows.ravel(), cols.ravel())),
+                               shape=(6 * int(keep.sum()), self.n_owned))
+        return layers[keep] * tol, op
 
     def tip_relative(self, array: np.ndarray, phi: float = 0.0) -> np.ndarray:
         """Rotating-frame deflection U = A^T (x0 + u) - x0 of the tip centre for an inertial

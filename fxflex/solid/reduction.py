@@ -323,6 +323,28 @@ class ReducedFormulation(FormulationBase):
         in the coordinates z of :class:`RotatingSystem`."""
         return self.rot.section @ X
 
+    def mode_span(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x, S) of rotating-frame mode vectors X (dof, k): the (4 s, dof) operator of
+        :meth:`SolidModel.span_sections` applied to the nodal basis once (at phi = 0, where
+        GCMS's inertial basis is the rotating one), then S = operator X (SPEC section 10). The
+        first call is collective on the build communicator."""
+        x, op = self._span_operator()
+        S = np.tensordot(op, X, axes=(2, 0))
+        return x.copy(), S
+
+    def _span_operator(self) -> tuple[np.ndarray, np.ndarray]:
+        """(x, (4, s, dof)): the span sections per unit z, the source build's when there is one
+        (it does not depend on the speed or the damping)."""
+        if self._source is not None:
+            return self._source._span_operator()
+        if self._span is None:
+            basis, _ = self.nodal_basis()
+            self._span = self.model.span_sections(basis)
+        return self._span
+
+    #: (x, operator) of :meth:`_span_operator`, built on first use
+    _span: tuple[np.ndarray, np.ndarray] | None = None
+
     def omega_max(self) -> float:
         """Highest circular frequency max |lambda| of the linearised rotating system (rad/s)."""
         return float(np.max(np.abs(self.eigenvalues())))

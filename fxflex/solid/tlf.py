@@ -312,6 +312,16 @@ class TLF(FormulationBase):
         full[free_entries(self.model)] = X
         return self.model.tip_section(full)
 
+    def mode_span(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x, S) of mode vectors on the free coordinates: every node layer's section centroid
+        translation and rotation about X (:meth:`SolidModel.span_sections`, SPEC section 10).
+        Collective: every rank gets the same result."""
+        from fxflex.solid.rotating import free_entries
+
+        full = np.zeros((self.model.n_owned,) + X.shape[1:], dtype=X.dtype)
+        full[free_entries(self.model)] = X
+        return self.model.span_sections(full)
+
     # -- pieces -----------------------------------------------------------------------------------
     def internal_force(self, q: np.ndarray) -> np.ndarray:
         """Q_k(u) (Eq. 33, 35) for the owned displacements q, ghosts accumulated: a view of the
