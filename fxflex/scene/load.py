@@ -27,7 +27,7 @@ __all__ = ["load_scene", "parse_override", "scene_from_dict", "validate", "valid
 #: cross-section and degenerates at 180 deg; beyond 90 deg (half the section) it is rejected
 MAX_TWIST_PER_ELEMENT_DEG = 90.0
 #: methods that carry a [tip_mass] (SPEC section 10); the others refuse one
-TIP_MASS_METHODS = ("lebb", "nebb")
+TIP_MASS_METHODS = ("lebb", "nebb", "ancf")
 
 
 def scene_from_dict(data: Mapping, base: Scene | None = None) -> Scene:

@@ -1,6 +1,7 @@
 """[tip_mass] (SPEC section 10, issue 16): the scene table, its checks, and the beams carrying it
 against closed forms (frequency equations) and an independent Ritz solution."""
 
+import functools
 import math
 
 import numpy as np
@@ -216,3 +217,59 @@ def test_torsion_frequency_with_a_tip_inertia(method, ratio):
     assert abs(f10 - exact) < tol and abs(f20 - exact) < tol
     bare = math.pi / 2 * math.sqrt(mat.G / mat.rho) / (2 * math.pi)
     assert exact < 0.9 * bare                  # the inertia matters at these ratios
+
+
+# ---------------------------------------------------------------------------- ANCF
+
+#: ANCF's locking-free variant: Euler-Bernoulli up to its transverse shear (docs/beams.md)
+_LF = {"mesh.beam_variant": "locking-free"}
+
+
+@functools.cache
+def _bare_flap_deviation() -> float:
+    """ANCF's own deviation from Euler-Bernoulli on the bare cantilever (shear, rotary inertia,
+    Poisson), 20 elements: the bound of its share with a tip mass, which only lowers the shear's
+    part of the strain energy (3 EI / (k G A L^2) against 20/3 of it under distributed inertia)."""
+    mat = Scene().material
+    exact = 1.8751040687119611**2 * math.sqrt(mat.E * H**2 / 12.0 / mat.rho) / (2 * math.pi)
+    return abs(_flap_hz("ancf", _uniform(20, 0.0, **_LF)) / exact - 1.0)
+
+
+@pytest.mark.parametrize("mu", [0.1, 1.0, 5.0])
+def test_ancf_flap_frequency_with_a_tip_mass_at_rest(mu):
+    """The tip mass on ANCF's position slot: the frequency equation's root within ANCF's own
+    (bare-beam) deviation from Euler-Bernoulli and its discretisation error (10 and 20
+    elements)."""
+    mat = Scene().material
+    bl = _tip_mass_root(mu)
+    exact = bl**2 * math.sqrt(mat.E * H**2 / 12.0 / mat.rho) / (2 * math.pi)
+    f10, f20 = (_flap_hz("ancf", _uniform(n, mu, **_LF)) for n in (10, 20))
+    tol = 2.0 * abs(f10 - f20) / exact + _bare_flap_deviation()
+    assert abs(f20 / exact - 1.0) < tol and abs(f10 / exact - 1.0) < tol
+    assert tol < 2e-4                           # against a 10 % to 55 % drop from the mass
+
+
+@functools.cache
+def _bare_torsion_hz(n: int) -> float:
+    return _torsion_hz("ancf", _uniform(n, **_LF))
+
+
+@pytest.mark.parametrize("ratio", [0.3, 3.0])
+def test_ancf_torsion_with_a_tip_inertia_through_the_gradients(ratio):
+    """The disc's rotary inertia through the section gradients: ANCF's torsion stiffness (not the
+    polar one; its section gradients carry their own) taken from its bare shaft, c = (2 L f_0)^2
+    for f_0 = sqrt(c) / (4 L), the disc's frequency follows from beta L tan(beta L) =
+    rho I_p L / J_X, f = beta sqrt(c) / (2 pi), at each element count; tolerance twice the
+    change of the ratio from 10 to 20 elements (both converge at order >= 1)."""
+    mat = Scene().material
+    Ip = B * H * (B**2 + H**2) / 12.0
+    Jx = ratio * mat.rho * Ip * 1.0
+    bl = brentq(lambda x: x * math.tan(x) - 1.0 / ratio, 1e-9, math.pi / 2 - 1e-12, xtol=1e-15)
+    keys = {"tip_mass.inertia": [Jx, Jx / 2, Jx / 2], **_LF}
+    err = []
+    for n in (10, 20):
+        bare = _bare_torsion_hz(n)
+        err.append(_torsion_hz("ancf", _uniform(n, **keys)) / (bare * bl / (math.pi / 2)) - 1.0)
+    assert abs(err[1]) < 2.0 * abs(err[0] - err[1]) + 1e-9
+    assert abs(err[1]) < 0.01                   # against the disc's 30 % to 70 % drop
+
