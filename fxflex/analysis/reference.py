@@ -194,12 +194,15 @@ def reference_key(scene: Scene) -> str:
     """Hash of what the equilibrium depends on: geometry, material, the loads and, for the
     absolute damping model, the damping (the relative model's equilibrium does not depend on c;
     neither depends on meshes, modes, speeds, ramp or integrator). The section keys of SPEC
-    section 9 count only away from their defaults (:meth:`Scene.stable_dict`)."""
+    section 9 and the tip mass of section 10 count only away from their defaults
+    (:meth:`Scene.stable_dict`)."""
     d = scene.stable_dict()
     what = {"geometry": d["geometry"], "material": d["material"],
             "load": {k: d["load"][k] for k in ("line_load", "tip_force")}}
     if scene.damping.model == "absolute" and scene.damping.c > 0:
         what["damping"] = d["damping"]
+    if "tip_mass" in d:                         # its centrifugal force moves the equilibrium
+        what["tip_mass"] = d["tip_mass"]
     text = json.dumps(what, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 

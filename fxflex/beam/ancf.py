@@ -45,12 +45,31 @@ from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
 
 __all__ = ["build", "dof_count", "ANCF", "constrained_slots", "QUADRATURE", "elasticity_matrix",
-           "reference_coordinates"]
+           "reference_coordinates", "tip_mass_block"]
 
 
 def constrained_slots(scene: Scene) -> tuple[int, ...]:
     """Root-node slots prescribed by the drive: all but dr/dX~ ("free-axial") or all ("full")."""
     return tuple(range(SLOTS)) if scene.mesh.ancf_root == "full" else (0, 2, 3, 4, 5, 6)
+
+
+def tip_mass_block(scene: Scene, e0_tip: np.ndarray) -> np.ndarray:
+    """The tip mass's share of the scalar mass on the tip node's slots (SLOTS x SLOTS; SPEC
+    section 10): a rigid body at the tip centroid r whose point at offset rho (undeformed, O-XYZ)
+    follows the tip section's affine motion x = r + [d_X, d_Y~, d_Z~] J0^-1 rho (J0 the same
+    gradients at e0), so its kinetic energy 1/2 m |r'|^2 + 1/2 sum_ab K_ab d_a' . d_b' is one of
+    the scalar form M_s (x) I_3 with K = J0^-1 Pi J0^-T (Pi = int rho rho^T dm,
+    :meth:`fxflex.scene.schema.TipMass.second_moments`): m on the position slot, K on the three
+    first-order gradients; the second-order ones carry none. For a rigid turn of the section,
+    J = A J0 with A' = [w]x A, this is 1/2 w^T (A J_tip A^T) w: the rotary inertia exactly; the
+    Coriolis and centrifugal terms follow from M_s as for the beam's own mass."""
+    tip = scene.tip_mass
+    J0 = e0_tip[1:4].T                                   # columns d_X, d_Y~, d_Z~
+    Jinv = np.linalg.inv(J0)
+    out = np.zeros((SLOTS, SLOTS))
+    out[0, 0] = tip.mass
+    out[1:4, 1:4] = Jinv @ tip.second_moments() @ Jinv.T
+    return out
 
 
 class ANCF(FormulationBase):
@@ -99,6 +118,8 @@ class ANCF(FormulationBase):
         # linear stiffness and scalar mass (Eq. 54: M = Ms x I_3), assembled
         KL = assemble_blocks(self.KLe, DPN, self.n_full)
         Ms = assemble_blocks(scalar_mass(rho, dV, tab.N), SLOTS, self.n_slots)
+        if scene.tip_mass.present:
+            Ms[-SLOTS:, -SLOTS:] += tip_mass_block(scene, self.e0n[-1])
         self.KL_dense, self.Ms = KL, Ms
         self.KL_add = SparseAdd(KL)                      # out += K_L u in the time loop
         self.Ms_add = SparseAdd(Ms, 3)                   # M_s times the (n, 3) node field

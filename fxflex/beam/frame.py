@@ -21,6 +21,15 @@ reduces to the section properties A, S_Y, S_Z, I_Y, I_Z, I_YZ of Eq. 41 (see
 ignored as in the paper): D = c/rho M (relative model); the absolute model F_d = -c (U' + phi' S U)
 adds the circulatory c/rho phi' G W (SPEC section 5). Q_N is zero for LEBB and the von Karman force
 for NEBB. The root node is clamped: the unknowns are the 6 n_el coordinates of the other nodes.
+
+A tip mass (SPEC section 10) is a rigid body at the tip centroid X_c = (R + L, 0, 0) whose
+points r (from X_c) move with the tip node as the section's points do, U = W_t + theta_t x r
+(N_c of Eq. 36 with the offset r in all three axes, :func:`point_quadratic`): it adds to the tip
+node's block of every integral above its point terms, from its mass m and second moments
+Pi = int r r^T dm (:meth:`fxflex.scene.schema.TipMass.second_moments`): m Q on the
+translations and sum_kl Pi_kl [e_k]x^T Q [e_l]x on the rotations (J on the rotations of M), and
+to g, n the vectors m Q X_c and sum_kl Pi_kl [e_k]x Q e_l (n: m Omega^2 (R + L) along X). The
+damping D = c/rho M, mass-proportional, acts on it as on the beam.
 """
 
 from __future__ import annotations
@@ -37,8 +46,8 @@ from fxflex.numerics.qep import DenseLinearisation
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
 
-__all__ = ["FloatingFrameBeam", "section_quadratic", "section_linear", "N0", "NY", "NZ",
-           "QUADRATURE_POINTS"]
+__all__ = ["FloatingFrameBeam", "section_quadratic", "section_linear", "point_quadratic",
+           "point_linear", "N0", "NY", "NZ", "QUADRATURE_POINTS"]
 
 #: Gauss points per element along X (exact to degree 11: the taper makes the integrands
 #: polynomials of degree <= 10 for an untwisted beam; the twist adds smooth trigonometric terms)
@@ -70,6 +79,31 @@ def section_linear(Q: np.ndarray, sec, X: np.ndarray) -> np.ndarray:
             + sec.S_Y[..., None] * (X * (NZ.T @ Q @ _EX) + N0.T @ Q @ _EZ)
             + sec.I_Z[..., None] * (NY.T @ Q @ _EY) + sec.I_Y[..., None] * (NZ.T @ Q @ _EZ)
             + sec.I_YZ[..., None] * (NY.T @ Q @ _EZ + NZ.T @ Q @ _EY))
+
+
+#: [e_k]x, the cross-product matrices of the axes: theta x r = -sum_k r_k [e_k]x theta
+_CROSS = np.array([[[0.0, 0, 0], [0, 0, -1], [0, 1, 0]], [[0.0, 0, 1], [0, 0, 0], [-1, 0, 0]],
+                   [[0.0, -1, 0], [1, 0, 0], [0, 0, 0]]])
+
+
+def point_quadratic(Q: np.ndarray, mass: float, Pi: np.ndarray) -> np.ndarray:
+    """int N_r^T Q N_r dm (6 x 6) over a rigid body of mass m and second moments Pi about its
+    centroid, N_r = [I, -[r]x] (U = W + theta x r): the point analogue of
+    :func:`section_quadratic`; the cross terms vanish (first moments zero about the centroid)."""
+    out = np.zeros((6, 6))
+    out[:3, :3] = mass * Q
+    out[3:, 3:] = np.einsum("kl,kab,bc,lcd->ad", Pi, _CROSS, Q, _CROSS)
+    out[3:, 3:] *= -1.0                                  # [e_k]x^T = -[e_k]x
+    return out
+
+
+def point_linear(Q: np.ndarray, mass: float, Pi: np.ndarray, Xc: np.ndarray) -> np.ndarray:
+    """int N_r^T Q (X_c + r) dm (6-vector), the point analogue of :func:`section_linear`:
+    m Q X_c on the translations, sum_kl Pi_kl [e_k]x Q e_l on the rotations."""
+    out = np.zeros(6)
+    out[:3] = mass * Q @ Xc
+    out[3:] = np.einsum("kl,kab,bl->a", Pi, _CROSS, Q)
+    return out
 
 
 def section_stiffness(scene: Scene, sec) -> np.ndarray:
@@ -136,6 +170,16 @@ class FloatingFrameBeam(FormulationBase):
                 "fq": _assemble(fq_e, n_full, 6)}
         # int rho X0^T P X0 dV: the undeformed beam's moment of inertia about the axis
         self.I0 = float(rho * np.sum(dx * (sec.A * X**2 + 2 * X * sec.S_Z + sec.I_Z)))
+        tip = scene.tip_mass
+        if tip.present:                     # the tip body's point terms (module docstring)
+            m, Pi = tip.mass, tip.second_moments()
+            Xc = np.array([line.hub_radius + line.length, 0.0, 0.0])
+            t = slice(n_full - 6, n_full)
+            for key, Q in (("M", np.eye(3)), ("G", S3), ("N", P3)):
+                full[key][t, t] += point_quadratic(Q, m, Pi)
+            for key, Q in (("g", S3), ("n", P3)):
+                full[key][t] += point_linear(Q, m, Pi, Xc)
+            self.I0 += m * Xc @ P3 @ Xc + float(np.trace(P3 @ Pi))
         # root rows, for the section forces the beam transmits to the clamp (root_stress)
         self.K_root, self.fq_root = full["K"][:6].copy(), full["fq"][:6].copy()
         f = slice(6, None)                                   # root node clamped

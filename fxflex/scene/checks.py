@@ -81,6 +81,8 @@ RANGES: dict[str, Interval] = {
     "reduction.ffrf_modes": _POSITIVE,
     "reduction.gcms_modes": _POSITIVE,
     "reduction.gcms_gram_tol": Interval(0.0, 1.0),
+    "tip_mass.mass": _NON_NEGATIVE,
+    "tip_mass.inertia": _NON_NEGATIVE,
 }
 CHOICES: dict[str, tuple[str, ...]] = {
     "geometry.section": ("rectangle", "ellipse", "naca4", "polygon"),
@@ -201,8 +203,23 @@ def _mesh(mesh) -> None:
                                             "gmsh .msh file (hexahedra or tetrahedra)")
 
 
+def _tip_mass(tip) -> None:
+    """The moments of inertia of a rigid body about its principal axes: each at most the sum of
+    the other two (J_X = int (y^2 + z^2) dm <= J_Y + J_Z = int (x^2 + y^2 + x^2 + z^2) dm), so
+    that its second moments int x^2 dm, ... are not negative (SPEC section 10)."""
+    J = tip.inertia
+    for i, name in enumerate("XYZ"):
+        others = J[(i + 1) % 3] + J[(i + 2) % 3]
+        if J[i] > others * (1.0 + 1e-12):
+            raise SceneError("tip_mass.inertia", f"got {shown(list(J))}: J_{name} exceeds the "
+                                                 "sum of the other two, which no rigid body "
+                                                 "does; allowed: each value at most the sum of "
+                                                 "the other two (a thin disc in the Y-Z plane: "
+                                                 "[2 J, J, J])")
+
+
 _RELATIONS = {"geometry": _geometry, "material": _material, "rotation": _rotation,
-              "mesh": _mesh}
+              "mesh": _mesh, "tip_mass": _tip_mass}
 
 
 def printable(name) -> str:
@@ -252,6 +269,16 @@ def check_scene(scene) -> None:
                                          f"material.E = {mat.E!r}, rho = {mat.rho!r}): "
                                          f"meaningless for an elastic body; allowed: below "
                                          f"{limit:.4g} rpm for this scene")
+    # the tip mass's centrifugal force m Omega^2 (R + L) on the tip section (its area at most
+    # tip_y tip_z: a lower bound of the stress)
+    pull = scene.tip_mass.mass * omega * omega * (R + L)
+    strain = pull / (g.tip_y * g.tip_z * mat.E)
+    if not strain < 1.0:
+        raise SceneError("tip_mass.mass", f"{scene.tip_mass.mass!r} kg at {scene.rotation.rpm!r} "
+                                          f"rpm pulls the tip section by {strain:.3g} times "
+                                          f"material.E ({pull:.3g} N): meaningless for an "
+                                          f"elastic body; allowed: below "
+                                          f"{scene.tip_mass.mass / strain:.4g} kg at this speed")
     # bending at each station under the line load and the tip force, on the stiffer axis of the
     # section (a lower bound of the stress)
     x = np.linspace(0.0, L, 101)

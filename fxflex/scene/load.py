@@ -26,6 +26,8 @@ __all__ = ["load_scene", "parse_override", "scene_from_dict", "validate", "valid
 #: interpolated cross-section gradients) shrinks mid-element to cos^2(dtheta / 2) of its
 #: cross-section and degenerates at 180 deg; beyond 90 deg (half the section) it is rejected
 MAX_TWIST_PER_ELEMENT_DEG = 90.0
+#: methods that carry a [tip_mass] (SPEC section 10); the others refuse one
+TIP_MASS_METHODS = ("lebb", "nebb", "ancf")
 
 
 def scene_from_dict(data: Mapping, base: Scene | None = None) -> Scene:
@@ -103,6 +105,9 @@ def validate_for(method: str, scene: Scene) -> None:
             raise SceneError(key, f"needs {modes[method]} clamped modes but mesh.solid "
                                   f"{list(scene.mesh.solid)} has {dof} unknowns; allowed: at "
                                   f"most {dof if method == 'ffrf' else 3 * dof}")
+    if scene.tip_mass.present and method not in TIP_MASS_METHODS:
+        raise SceneError("tip_mass", f"{method} does not take a tip mass yet; allowed: mass and "
+                                     f"inertia 0, or the methods {', '.join(TIP_MASS_METHODS)}")
     if method == "ancf":
         _twist_per_element(scene, "mesh.beam_elements", scene.mesh.beam_elements,
                            "ANCF elements")

@@ -15,11 +15,13 @@ import json
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from fxflex.scene.checks import check_keys, check_scene, check_section
 
 __all__ = [
     "Geometry", "Material", "Section", "Load", "Rotation", "Damping", "MeshSpec", "Reduction",
-    "Scene", "PAPER_RPM", "PAPER_DAMPING", "METHODS",
+    "TipMass", "Scene", "PAPER_RPM", "PAPER_DAMPING", "METHODS",
 ]
 
 METHODS = ("ffrf", "gcms", "tlf", "lebb", "nebb", "ancf")
@@ -28,6 +30,9 @@ PAPER_RPM = (1000.0, 5000.0, 10000.0)
 #: defaults (Scene.hash)
 LATER_KEYS = ("mesh.solid_degree", "mesh.beam_variant", "geometry.section", "geometry.airfoil",
               "geometry.contour", "geometry.wall", "geometry.stations", "mesh.solid_file")
+#: whole tables beyond the paper's scene (SPEC section 10): left out of the hash when every key
+#: is at its default
+LATER_TABLES = ("tip_mass",)
 PAPER_DAMPING = (100.0, 500.0, 1000.0)
 
 
@@ -176,6 +181,30 @@ class Reduction:
 
 
 @dataclass(frozen=True)
+class TipMass:
+    """SPEC section 10: a rigid body attached at the tip section centroid, of mass ``mass`` (kg)
+    and principal moments of inertia ``inertia`` (kg m^2) about axes through that point parallel
+    to X, Y, Z in the undeformed beam. The defaults (0) leave every operator as it was."""
+
+    mass: float = 0.0
+    inertia: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        check_section(self, "tip_mass")
+
+    @property
+    def present(self) -> bool:
+        return self.mass > 0.0 or any(j > 0.0 for j in self.inertia)
+
+    def second_moments(self):
+        """Pi = int r r^T dm (3 x 3, about the centroid) of the body whose moments of inertia
+        are J = tr(Pi) I - Pi: Pi = tr(J) / 2 I - J (diagonal; non-negative for a rigid body,
+        the triangle inequality that :mod:`fxflex.scene.checks` asks of the inertia)."""
+        J = np.asarray(self.inertia, dtype=float)
+        return np.diag(0.5 * J.sum() - J)
+
+
+@dataclass(frozen=True)
 class Scene:
     geometry: Geometry = field(default_factory=Geometry)
     material: Material = field(default_factory=Material)
@@ -185,6 +214,7 @@ class Scene:
     damping: Damping = field(default_factory=Damping)
     mesh: MeshSpec = field(default_factory=MeshSpec)
     reduction: Reduction = field(default_factory=Reduction)
+    tip_mass: TipMass = field(default_factory=TipMass)
 
     def __post_init__(self) -> None:
         check_scene(self)
@@ -195,9 +225,13 @@ class Scene:
 
     def stable_dict(self) -> dict:
         """:meth:`to_dict` without the keys of SPEC sections 9-10 (:data:`LATER_KEYS`) that are
-        at their defaults: what a hash of a scene of sections 1-8 was computed from before those
-        keys existed, so such hashes (checkpoints, the stored reference) keep their value."""
+        at their defaults, and without the tables of :data:`LATER_TABLES` whose keys all are:
+        what a hash of a scene of sections 1-8 was computed from before those keys existed, so
+        such hashes (checkpoints, the stored reference) keep their value."""
         data = self.to_dict()
+        for sec in LATER_TABLES:
+            if getattr(self, sec) == type(getattr(self, sec))():
+                del data[sec]
         for key in LATER_KEYS:
             sec, name = key.split(".")
             defaults = {f.name: f.default for f in dataclasses.fields(getattr(self, sec))}
