@@ -113,6 +113,14 @@ def _physics(p: argparse.ArgumentParser) -> None:
                    help="sets damping.model (SPEC section 5)")
 
 
+def _tolerance(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--tol", type=_positive("--tol"), metavar="EPS",
+                   help=f"refine the discretisation until the estimated error ({what}) is "
+                        "below EPS (docs/tolerance.md)")
+    p.add_argument("--tol-levels", type=_count(2), metavar="N",
+                   help="with --tol: at most N levels of refinement (default: the whole ladder)")
+
+
 def make_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="fxflex", description=__doc__.split("\n\n")[0],
                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -127,6 +135,7 @@ def make_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("steady", help="rotating-frame equilibrium at constant speed")
     p.add_argument("--method", type=_method, required=True, help=" | ".join(METHODS))
     _physics(p)
+    _tolerance(p, "each tip component relative to |tip|")
     _common(p)
 
     p = sub.add_parser("run", help="transient simulation; tip deflection history")
@@ -182,6 +191,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR",
                    help="output folder (default out/modes with --campbell; without it, write "
                         "modes_<method>.json there only if given)")
+    _tolerance(p, "each frequency relative to itself")
     _common(p)
 
     p = sub.add_parser("compare", help="the paper's comparison: every method at the three "
@@ -313,6 +323,7 @@ def _warn(comm, warnings: list[str], *notes: str | None) -> None:
 
 
 def cmd_steady(args, comm) -> None:
+    from fxflex.analysis.tolerance import json_fields, steady_to_tolerance
     from fxflex.formulation import build
     from fxflex.numerics.qep import verdict as stability_verdict
     from fxflex.io import envelope, tip_mm
@@ -322,27 +333,64 @@ def cmd_steady(args, comm) -> None:
         log.warning("steady: rotation.profile = %r; solving at the final speed %g rpm",
                     scene.rotation.profile, scene.rotation.rpm)
     t0 = time.perf_counter()
-    form = build(args.method, scene, comm)
-    t1 = time.perf_counter()
-    st = form.steady_state()
-    t2 = time.perf_counter()
+    refined, failed = _refined(args, comm, lambda **kw: steady_to_tolerance(
+        args.method, scene, comm, args.tol, **kw), scene)
+    if refined is None:
+        form = build(args.method, scene, comm)
+        t1 = time.perf_counter()
+        st = form.steady_state()
+        timings = {"preprocess": t1 - t0, "solve": time.perf_counter() - t1}
+    else:                           # the finest level: its build and solve, then the whole ladder
+        best, scene = refined["best"], refined["scene"]
+        form, st = best["form"], best["steady"]
+        timings = {"preprocess": best["build_s"], "solve": best["seconds"] - best["build_s"],
+                   "refinement": time.perf_counter() - t0}
     verdict, why = stability_verdict(form, st)
     warnings: list[str] = []
     _warn(comm, warnings, *form.warnings, why)
-    timings = {"preprocess": t1 - t0, "solve": t2 - t1}
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        tip_mm=tip_mm(st.tip), stable=verdict, converged=st.converged,
                        iterations=st.iterations, warnings=warnings, timings_s=timings,
-                       detail_timings_s={**form.timings, **st.timings}, **st.extra)
+                       detail_timings_s={**form.timings, **st.timings}, **st.extra,
+                       **json_fields(refined, "steady"))
     text = (f"{args.method} steady state at {scene.rotation.rpm:g} rpm  (dof {form.dof}, "
             f"{st.iterations} iterations, {'converged' if st.converged else 'NOT converged'})\n"
             f"  tip: {_fmt_tip(tip_mm(st.tip))}\n"
             f"  stable: {verdict}   preprocess {timings['preprocess']:.2f} s, "
             f"solve {timings['solve']:.2f} s"
+            + _tol_text(refined)
             + "".join(f"\n  WARNING: {note}" for note in warnings))
     _emit(comm, args, payload, text)
+    if failed is not None:
+        raise failed
     if not st.converged:
         raise SystemExit(1)
+
+
+def _refined(args, comm, refine, scene):
+    """``--tol``: (the refinement, None) or, when a cap stops it above EPS, (its best, the
+    error to raise after the best result is written); without --tol (None, None)."""
+    from fxflex.analysis.tolerance import ToleranceNotMet
+
+    if args.tol is None:
+        if args.tol_levels is not None:
+            raise FxflexError("--tol-levels: only with --tol EPS")
+        return None, None
+
+    try:
+        return refine(max_levels=args.tol_levels), None
+    except ToleranceNotMet as exc:
+        return exc.result, exc
+
+
+def _tol_text(refined) -> str:
+    from fxflex.analysis.tolerance import shown
+
+    if refined is None:
+        return ""
+    return (f"\n  --tol: {len(refined['levels'])} levels, reached "
+            f"{shown(refined['discretisation'])}, estimated "
+            f"error {max(refined['estimate']):.3g} ({', '.join(sorted(set(refined['how'])))})")
 
 
 @dataclass
@@ -652,8 +700,10 @@ def _agreed(comm, fn, *args, **kwargs):
 
 
 def cmd_modes(args, comm) -> None:
-    from fxflex.analysis.modes import run_modes
+    from fxflex.analysis.modes import modes_table, run_modes
+    from fxflex.analysis.tolerance import json_fields, modes_to_tolerance
     from fxflex.formulation import BuildOptions, check_options
+    from fxflex.io import envelope
 
     scene = _scene_from_args(args)
     options = BuildOptions(mass=args.mass)
@@ -662,9 +712,39 @@ def cmd_modes(args, comm) -> None:
         raise FxflexError(f"--n: must be >= 1, got {args.n}")
     out_dir = args.out if args.out is not None else ("out/modes" if args.campbell else None)
     check_paths(comm, [Output("--out", out_dir, folder=True)])
-    payload, text = run_modes(args.method, scene, comm, options, args.n, args.campbell,
-                              os.path.abspath(out_dir) if out_dir else None)
-    _emit(comm, args, payload, text)
+    if args.tol is not None and args.campbell:
+        raise FxflexError("--tol: not with --campbell (one speed at a time); allowed: --tol "
+                          "without --campbell")
+    if args.tol is None:
+        _refined(args, comm, None, scene)
+        payload, text = run_modes(args.method, scene, comm, options, args.n, args.campbell,
+                                  os.path.abspath(out_dir) if out_dir else None)
+        payload.update(json_fields(None, "modes"))
+        _emit(comm, args, payload, text)
+        return
+    t0 = time.perf_counter()
+    refined, failed = _refined(args, comm, lambda **kw: modes_to_tolerance(
+        args.method, scene, comm, args.tol, args.n, options=options, **kw), scene)
+    best, scene = refined["best"], refined["scene"]
+    modes = best["modes"]
+    timings = {"preprocess": best["build_s"], "solve": best["seconds"] - best["build_s"],
+               "refinement": time.perf_counter() - t0}
+    payload = envelope(scene, method=args.method, dof=best["dof"],
+                       damping={"c": scene.damping.c, "model": scene.damping.model},
+                       n=len(modes.labels), **modes.to_dict(), timings_s=timings,
+                       **json_fields(refined, "modes"))
+    text = [f"{args.method} modes about the steady state at {scene.rotation.rpm:g} rpm (dof "
+            f"{best['dof']})", *modes_table(modes), f"  stable: {modes.stable}" +
+            _tol_text(refined), *(f"  WARNING: {note}" for note in modes.warnings)]
+    if out_dir is not None and comm.rank == 0:
+        os.makedirs(out_dir, exist_ok=True)
+        path = os.path.join(out_dir, f"modes_{args.method}.json")
+        with open(path, "w") as fh:
+            json.dump(payload, fh, indent=1)
+        text.append(f"  written: {path}")
+    _emit(comm, args, payload, "\n".join(text))
+    if failed is not None:
+        raise failed
 
 
 #: ``fxflex bench NAME`` modules not named NAME (one per name across the package)

@@ -1,0 +1,282 @@
+"""Accuracy on request: refine a method's discretisation until its estimated error is below EPS
+(SPEC section 9 "Accuracy on request", issue 15; ``fxflex steady --tol``, ``fxflex modes --tol``).
+
+The estimate is of the discretisation error of the method's own continuum (beam theory for the
+beams, the linear continuum for FFRF, GCMS and LEBB, the nonlinear one for TLF): the model error
+between theories is what ``fxflex compare`` is for.
+
+Refinement ladder per method (:func:`ladder`), cheap first, only through existing scene keys:
+
+- LEBB: ``mesh.beam_elements`` 2, 4, 8, ... (uniform Euler-Bernoulli beam; converges as h^2,
+  docs/convergence_measured.md);
+- NEBB, ANCF: ``mesh.beam_variant = "locking-free"`` (unless the scene sets another variant than
+  the default "paper" -- a scene that names "paper" explicitly is the default and is refined
+  locking-free too), elements 4, 8, ... (NEBB) and 5, 10, ... (ANCF);
+- TLF, FFRF, GCMS: ``mesh.solid_degree = 2`` (27-node hexahedra) on ``mesh.solid`` =
+  8x2x2, 16x2x2, 32x4x2, 48x6x4, 64x8x4, 96x12x6 (Y and Z divisions stay even, SPEC 8); FFRF and
+  GCMS then raise the mode count (``reduction.ffrf_modes`` / ``gcms_modes``, doubled) on the mesh
+  reached until its change is below EPS/3, the mesh having been refined to 2 EPS/3, so that the
+  sum of both estimates stays below EPS.
+
+Error estimate (:func:`estimate`), per component from the successive levels with h = 1 / (elements
+along the span): with three levels whose differences have one sign and shrink, and whose observed
+order p (:func:`fxflex.analysis.reference.richardson`) lies in [MIN_ORDER, MAX_ORDER], the
+estimate is |f_3 - f_Richardson| ("richardson"); otherwise the difference of the last two levels
+|f_3 - f_2| ("difference"). Steady: each tip component relative to |tip| of the finest level;
+modes: each frequency relative to itself. The result returned is the finest level's (a real
+discretisation, not the extrapolation).
+
+Caps: ``max_levels`` levels (default the whole ladder) and ``max_dof`` unknowns (default
+:data:`MAX_DOF`); a ladder that ends above EPS raises :class:`ToleranceNotMet`, which carries the
+best result and names its estimate. Levels already computed are kept in the :class:`Refiner`'s
+dict (the disk caches of meshes and modes help across runs).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from fxflex.analysis.reference import richardson
+from fxflex.errors import FxflexError
+from fxflex.scene import Scene, scene_from_dict
+
+__all__ = ["COMPONENTS", "SOLID_LADDER", "MAX_DOF", "ToleranceNotMet", "ladder", "estimate",
+           "Refiner", "steady_to_tolerance", "modes_to_tolerance", "json_fields", "shown"]
+
+COMPONENTS = ("longitudinal", "orthogonal", "load")
+#: Q2 meshes (nx, ny, nz) of the solid methods, coarse to fine
+SOLID_LADDER = ((8, 2, 2), (16, 2, 2), (32, 4, 2), (48, 6, 4), (64, 8, 4), (96, 12, 6))
+#: beam element counts: first level and number of doublings
+BEAM_START = {"lebb": 2, "nebb": 4, "ancf": 5}
+BEAM_LEVELS = 8
+#: default cap on the unknowns of a level (Q2 64x8x4 has 58752; 96x12x6 187200 is refused)
+MAX_DOF = 100_000
+#: observed orders accepted for Richardson (the clamp singularity gives ~1.5 on Q2, beams 2)
+MIN_ORDER, MAX_ORDER = 0.5, 8.0
+#: mode-count doublings tried on the mesh reached (FFRF, GCMS)
+MODE_DOUBLINGS = 3
+SOLIDS = ("ffrf", "gcms", "tlf")
+MODAL = {"ffrf": "ffrf_modes", "gcms": "gcms_modes"}
+
+
+class ToleranceNotMet(FxflexError):
+    """The ladder ended (cap) above EPS; ``result`` is the best one reached (exit status 1)."""
+
+    status = 1
+
+    def __init__(self, message: str, result: dict):
+        self.result = result
+        super().__init__(message)
+
+
+def ladder(method: str, scene: Scene) -> list[tuple[float, dict]]:
+    """(h, scene overrides in TOML layout) per level, coarse first (module docstring)."""
+    if method in SOLIDS:
+        return [(1.0 / nx, {"mesh": {"solid_degree": 2, "solid": [nx, ny, nz]}})
+                for nx, ny, nz in SOLID_LADDER]
+    n0 = BEAM_START[method]
+    mesh: dict = {}
+    if method in ("nebb", "ancf"):
+        variant = scene.mesh.beam_variant
+        mesh["beam_variant"] = "locking-free" if variant == "paper" else variant
+    return [(1.0 / (n0 * 2**k), {"mesh": {**mesh, "beam_elements": n0 * 2**k}})
+            for k in range(BEAM_LEVELS)]
+
+
+def estimate(h, values, scale) -> tuple[np.ndarray, list[str]]:
+    """Per column of ``values`` (levels x quantities, h descending): the estimated error of the
+    last level relative to ``scale`` (a number or one per quantity), and how ("richardson" or
+    "difference"; module docstring). Needs two levels or more."""
+    h = np.asarray(h, float)
+    f = np.asarray(values, float)
+    if f.ndim == 1:
+        f = f[:, None]
+    if len(h) < 2:
+        raise ValueError("estimate: needs two or more levels")
+    scale = np.broadcast_to(np.abs(np.asarray(scale, float)), f.shape[1:])
+    err, how = np.empty(f.shape[1]), []
+    for k in range(f.shape[1]):
+        kind, e = "difference", abs(f[-1, k] - f[-2, k])
+        if len(h) >= 3:
+            d12, d23 = f[-3, k] - f[-2, k], f[-2, k] - f[-1, k]
+            p, value = richardson(h[-3:], f[-3:, k])
+            if p is not None and abs(d23) < abs(d12) and MIN_ORDER <= p <= MAX_ORDER:
+                kind, e = "richardson", abs(f[-1, k] - value)
+        err[k] = e / scale[k] if scale[k] > 0 else (0.0 if e == 0 else np.inf)
+        how.append(kind)
+    return err, how
+
+
+def _describe(scene: Scene, method: str) -> dict:
+    """The discretisation of a level (SPEC 9 ``discretisation`` keys)."""
+    m = scene.mesh
+    solid = method in SOLIDS
+    return {"mesh": list(m.solid) if solid else None,
+            "degree": m.solid_degree if solid else None,
+            "modes": getattr(scene.reduction, MODAL[method]) if method in MODAL else None,
+            "elements": None if solid else m.beam_elements,
+            "variant": m.beam_variant if method in ("nebb", "ancf") else None}
+
+
+class Refiner:
+    """Solves levels of one method on one communicator and keeps them by scene hash (in-process
+    reuse; ``steady`` and ``modes`` share the builds through the disk caches)."""
+
+    def __init__(self, method: str, comm, options=None, pairs: int = 6):
+        self.method, self.comm, self.options, self.pairs = method, comm, options, pairs
+        self.done: dict[tuple[str, str], dict] = {}
+
+    def level(self, scene: Scene, what: str) -> dict:
+        """One level: ``what`` = "steady" (tip, m) or "modes" (frequencies, Hz)."""
+        from fxflex.formulation import build
+
+        key = (what, scene.hash)
+        if key in self.done:
+            return self.done[key]
+        t0 = time.perf_counter()
+        form = build(self.method, scene, self.comm, self.options)
+        t1 = time.perf_counter()
+        if what == "steady":
+            st = form.steady_state()
+            if not st.converged:
+                raise FxflexError(f"--tol: the {self.method} equilibrium on "
+                                  f"{_describe(scene, self.method)} did not converge")
+            values = [float(x) for x in st.tip]
+            extra = {"steady": st}
+        else:
+            from fxflex.analysis.modes import modes_of
+            modes = modes_of(form, self.pairs)
+            values = [float(x) for x in modes.frequencies_hz]
+            extra = {"modes": modes}
+        row = {"discretisation": _describe(scene, self.method), "dof": form.dof,
+               "result": values, "seconds": time.perf_counter() - t0,
+               "build_s": t1 - t0, "form": form, **extra}
+        self.done[key] = row
+        return row
+
+
+def _public(row: dict, what: str) -> dict:
+    name = "tip_m" if what == "steady" else "frequencies_hz"
+    return {"discretisation": row["discretisation"], "dof": row["dof"], name: row["result"],
+            "seconds": row["seconds"]}
+
+
+def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: int | None,
+            max_dof: int, log) -> dict:
+    method = refiner.method
+    steps = ladder(method, scene)[: max_levels or None]
+    share = 2.0 / 3.0 if method in MODAL else 1.0
+    hs, rows, err, how = [], [], None, []
+    capped = "the ladder's last level"
+    for h, overrides in steps:
+        level_scene = scene_from_dict(overrides, base=scene)
+        if _mesh_unknowns(method, level_scene) > max_dof and len(rows) >= 2:
+            capped = f"the cap of {max_dof} unknowns"
+            break
+        row = refiner.level(level_scene, what)
+        if rows and len(row["result"]) != len(rows[-1][0]["result"]):
+            raise FxflexError(f"--tol: the {method} levels give different numbers of modes")
+        hs.append(h)
+        rows.append((row, level_scene))
+        if log is not None:
+            log(f"--tol: {method} {row['discretisation']}: {row['dof']} unknowns, "
+                f"{row['seconds']:.2f} s")
+        if len(rows) >= 2:
+            values = [r["result"] for r, _ in rows]
+            err, how = estimate(hs, values, _scale(values[-1], what))
+            if np.all(err < share * eps):
+                break
+    else:
+        if max_levels:
+            capped = f"the cap of {max_levels} levels"
+    best, best_scene = rows[-1]
+    levels = [_public(r, what) for r, _ in rows]
+    if err is None:
+        raise FxflexError("--tol: the cap leaves one level; allowed: two levels or more")
+    mode_err = np.zeros_like(err)
+    if method in MODAL and np.all(err < share * eps):
+        key = MODAL[method]
+        for _ in range(MODE_DOUBLINGS):
+            count = 2 * getattr(best_scene.reduction, key)
+            more_scene = scene_from_dict({"reduction": {key: count}}, base=best_scene)
+            more = refiner.level(more_scene, what)
+            levels.append(_public(more, what))
+            mode_err, _ = estimate([2.0, 1.0], [best["result"], more["result"]],
+                                   _scale(more["result"], what))
+            best, best_scene = more, more_scene
+            if np.all(mode_err < eps / 3.0):
+                break
+        else:
+            capped = f"{MODE_DOUBLINGS} doublings of the mode count"
+    if len(levels) > len(rows):
+        how = [f"{k} + mode-count difference" for k in how]
+    total = err + mode_err
+    out = {"best": best, "scene": best_scene, "estimate": [float(x) for x in total],
+           "how": how, "levels": levels,
+           "discretisation": {**best["discretisation"], "levels": levels}}
+    if not np.all(total < eps):
+        worst = float(np.max(total))
+        raise ToleranceNotMet(f"--tol {eps:g}: not reached within {capped}; best estimate "
+                              f"{worst:.3g} on {shown(best['discretisation'])} "
+                              f"({best['dof']} unknowns)", out)
+    return out
+
+
+def shown(discretisation: dict) -> str:
+    """``mesh [48, 6, 4], degree 2``: the keys of a discretisation that apply, on one line."""
+    return ", ".join(f"{k} {v}" for k, v in discretisation.items()
+                     if k != "levels" and v is not None)
+
+
+def _mesh_unknowns(method: str, scene: Scene) -> int:
+    """Unknowns of a level's mesh (Q2 with the root clamped: 3 (2 nx) (2 ny + 1) (2 nz + 1)); the
+    beams' few hundred are never capped."""
+    if method not in SOLIDS:
+        return 0
+    nx, ny, nz = scene.mesh.solid
+    return 3 * (2 * nx) * (2 * ny + 1) * (2 * nz + 1)
+
+
+def _scale(values, what: str):
+    v = np.asarray(values, float)
+    return np.linalg.norm(v) if what == "steady" else np.abs(v)
+
+
+def steady_to_tolerance(method: str, scene: Scene, comm, eps: float, *, max_levels=None,
+                        max_dof: int = MAX_DOF, refiner: Refiner | None = None,
+                        log=None) -> dict:
+    """Refine until every tip component's estimated error relative to |tip| is below ``eps``.
+    Returns ``best`` (the level: form, steady state, tip), ``scene`` (its scene), ``estimate``
+    (per component), ``how``, ``levels`` and ``discretisation`` (SPEC 9); raises
+    :class:`ToleranceNotMet` (with that dict) when a cap ends the ladder above ``eps``."""
+    _check(eps)
+    refiner = refiner or Refiner(method, comm)
+    return _refine(refiner, scene, eps, "steady", max_levels, max_dof, log)
+
+
+def modes_to_tolerance(method: str, scene: Scene, comm, eps: float, pairs: int, *, options=None,
+                       max_levels=None, max_dof: int = MAX_DOF, log=None) -> dict:
+    """As :func:`steady_to_tolerance` for the ``pairs`` lowest frequencies, each relative to
+    itself; ``best`` carries the :class:`~fxflex.analysis.modes.Modes` of the level."""
+    _check(eps)
+    refiner = Refiner(method, comm, options, pairs)
+    return _refine(refiner, scene, eps, "modes", max_levels, max_dof, log)
+
+
+def json_fields(out: dict | None, what: str) -> dict:
+    """SPEC 9 ``error_estimate`` and ``discretisation`` of a refinement (None: both null).
+    Steady: an object per tip component; modes: a list, one per frequency. ``how`` says per
+    entry whether it is a Richardson estimate or the difference of the last two levels."""
+    if out is None:
+        return {"error_estimate": None, "discretisation": None}
+    est = out["estimate"]
+    error = dict(zip(COMPONENTS, est)) if what == "steady" else list(est)
+    return {"error_estimate": error,
+            "discretisation": {**out["discretisation"], "estimate_kind": out["how"]}}
+
+
+def _check(eps: float) -> None:
+    if not (0.0 < eps < 1.0):
+        raise FxflexError(f"--tol: got {eps:g}; allowed: 0 < EPS < 1 (a relative error)")
