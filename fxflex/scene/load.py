@@ -87,6 +87,9 @@ def validate_for(method: str, scene: Scene) -> None:
                                           f"span; a wall does not stretch with it); allowed: "
                                           f"root and tip sizes equal and no wall in the "
                                           f"stations, or lebb, nebb")
+    if scene.tip_mass.present and method not in TIP_MASS_METHODS:
+        raise SceneError("tip_mass", f"{method} does not take a tip mass yet; allowed: mass and "
+                                     f"inertia 0, or the methods {', '.join(TIP_MASS_METHODS)}")
     if scene.mesh.solid_file:
         if method not in ("ffrf", "gcms", "tlf"):
             raise SceneError("mesh.solid_file", f"{method} is a beam method and takes its body "
@@ -105,9 +108,6 @@ def validate_for(method: str, scene: Scene) -> None:
             raise SceneError(key, f"needs {modes[method]} clamped modes but mesh.solid "
                                   f"{list(scene.mesh.solid)} has {dof} unknowns; allowed: at "
                                   f"most {dof if method == 'ffrf' else 3 * dof}")
-    if scene.tip_mass.present and method not in TIP_MASS_METHODS:
-        raise SceneError("tip_mass", f"{method} does not take a tip mass yet; allowed: mass and "
-                                     f"inertia 0, or the methods {', '.join(TIP_MASS_METHODS)}")
     if method == "ancf":
         _twist_per_element(scene, "mesh.beam_elements", scene.mesh.beam_elements,
                            "ANCF elements")
