@@ -24,6 +24,7 @@ SELF = MPI.COMM_SELF
 FIELDS = ("u", "U_hub", "rotation")
 #: a few roundings of coordinates of 1 m (the products and differences of A, R0 and X0)
 POS = 16 * np.finfo(float).eps
+EPS = np.finfo(float).eps
 SMALL = ["--set", "mesh.beam_elements=4", "--set", "geometry.twist_deg=-10"]
 
 
@@ -213,8 +214,10 @@ def test_frame_beams_write_their_nodal_displacement_and_rotation(tmp_path, metho
     t = 0.3 / scene.rotation.omega
     f = written(form, tmp_path / f"{COMM.rank}.xdmf", t, W)
     nodes = np.vstack([np.zeros((1, 6)), W.reshape(-1, 6)])
-    np.testing.assert_array_equal(f["U_hub"], nodes[:, :3])
-    np.testing.assert_array_equal(f["rotation"], nodes[:, 3:])
+    # the writer turns the frame's nodal values into the hub's fields: equal to round-off of
+    # that product (a few ulps of the largest entry), not bit for bit across BLAS builds
+    for name, part in (("U_hub", nodes[:, :3]), ("rotation", nodes[:, 3:])):
+        np.testing.assert_allclose(f[name], part, rtol=0, atol=8 * EPS * np.abs(part).max())
     X0 = np.zeros((5, 3))
     X0[:, 0] = np.linspace(0.0, 1.0, 5)
     A = form.drive.A(t)

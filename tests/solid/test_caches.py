@@ -10,6 +10,7 @@ from mpi4py import MPI
 
 from fxflex import cache
 from fxflex.formulation import build
+from fxflex.mesh.solid import mesh_key
 from fxflex.scene import load_scene
 from fxflex.solid.cms import clamped_modes, modes_key
 from fxflex.solid.tlf_invariants import InvariantForce, invariant_key
@@ -47,8 +48,9 @@ def test_modes_hit_is_identical_and_every_keyed_input_misses(folder, monkeypatch
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
 
     def key(scene=SCENE, count=6, tol=1e-12, degree=2):
-        return modes_key(SimpleNamespace(scene=scene, divisions=scene.mesh.solid,
-                                         quadrature_degree=degree, degree=1), count, tol)
+        mesh = SimpleNamespace(key=mesh_key(scene.geometry, scene.mesh.solid))
+        return modes_key(SimpleNamespace(scene=scene, solid_mesh=mesh, quadrature_degree=degree,
+                                         degree=1), count, tol)
 
     base = modes_key(model, 6, 1e-12)
     assert key() == base
