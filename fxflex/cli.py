@@ -189,8 +189,14 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--mass", choices=("consistent", "lumped"),
                    help="tlf mass matrix (default: as for run)")
     p.add_argument("--out", metavar="DIR",
-                   help="output folder (default out/modes with --campbell; without it, write "
-                        "modes_<method>.json there only if given)")
+                   help="output folder: with --campbell the diagram's PNG, CSVs and JSON "
+                        "(default out/modes); without it, only if given, modes_<method>.json "
+                        "and the mode shapes shapes_<method>.csv and shapes_<method>.png")
+    p.add_argument("--elastodyn", metavar="FILE",
+                   help="write the mode-shape section of an ElastoDyn blade file (BldFl1Sh, "
+                        "BldFl2Sh, BldEdgSh: x^2..x^6 polynomials fitted to flap 1, flap 2 and "
+                        "edge 1 at the scene's speed; at least 6 modes are computed, more until "
+                        "those are found); not with --campbell")
     _tolerance(p, "each frequency relative to itself")
     _common(p)
 
@@ -700,51 +706,63 @@ def _agreed(comm, fn, *args, **kwargs):
 
 
 def cmd_modes(args, comm) -> None:
-    from fxflex.analysis.modes import modes_table, run_modes
+    from fxflex.analysis.modes import (ELASTODYN_NOT_CAMPBELL, modes_for_export, run_modes,
+                                       single_speed)
     from fxflex.analysis.tolerance import json_fields, modes_to_tolerance
     from fxflex.formulation import BuildOptions, check_options
-    from fxflex.io import envelope
 
     scene = _scene_from_args(args)
     options = BuildOptions(mass=args.mass)
     check_options(args.method, options)
     if args.n < 1:
         raise FxflexError(f"--n: must be >= 1, got {args.n}")
+    if args.elastodyn is not None and args.campbell:
+        raise FxflexError(ELASTODYN_NOT_CAMPBELL)
     out_dir = args.out if args.out is not None else ("out/modes" if args.campbell else None)
-    check_paths(comm, [Output("--out", out_dir, folder=True)])
+    out_dir = os.path.abspath(out_dir) if out_dir else None
+    _check_modes_paths(args, comm, out_dir)
     if args.tol is not None and args.campbell:
         raise FxflexError("--tol: not with --campbell (one speed at a time); allowed: --tol "
                           "without --campbell")
     if args.tol is None:
         _refined(args, comm, None, scene)
         payload, text = run_modes(args.method, scene, comm, options, args.n, args.campbell,
-                                  os.path.abspath(out_dir) if out_dir else None)
+                                  out_dir, args.elastodyn)
         payload.update(json_fields(None, "modes"))
         _emit(comm, args, payload, text)
         return
     t0 = time.perf_counter()
-    refined, failed = _refined(args, comm, lambda **kw: modes_to_tolerance(
-        args.method, scene, comm, args.tol, args.n, options=options, **kw), scene)
+
+    def refine(pairs):
+        refined, failed = _refined(args, comm, lambda **kw: modes_to_tolerance(
+            args.method, scene, comm, args.tol, pairs, options=options, **kw), scene)
+        return refined["best"]["modes"], refined, failed
+
+    modes, refined, failed = modes_for_export(refine, args.n, args.elastodyn is not None)
     best, scene = refined["best"], refined["scene"]
-    modes = best["modes"]
     timings = {"preprocess": best["build_s"], "solve": best["seconds"] - best["build_s"],
                "refinement": time.perf_counter() - t0}
-    payload = envelope(scene, method=args.method, dof=best["dof"],
-                       damping={"c": scene.damping.c, "model": scene.damping.model},
-                       n=len(modes.labels), **modes.to_dict(), timings_s=timings,
-                       **json_fields(refined, "modes"))
-    text = [f"{args.method} modes about the steady state at {scene.rotation.rpm:g} rpm (dof "
-            f"{best['dof']})", *modes_table(modes), f"  stable: {modes.stable}" +
-            _tol_text(refined), *(f"  WARNING: {note}" for note in modes.warnings)]
-    if out_dir is not None and comm.rank == 0:
-        os.makedirs(out_dir, exist_ok=True)
-        path = os.path.join(out_dir, f"modes_{args.method}.json")
-        with open(path, "w") as fh:
-            json.dump(payload, fh, indent=1)
-        text.append(f"  written: {path}")
-    _emit(comm, args, payload, "\n".join(text))
+    head = (f"{args.method} modes about the steady state at {scene.rotation.rpm:g} rpm (dof "
+            f"{best['dof']})")
+    payload, text = single_speed(args.method, scene, comm, modes, best["dof"], timings, out_dir,
+                                 args.elastodyn, head=head, tail=_tol_text(refined),
+                                 fields=json_fields(refined, "modes"))
+    _emit(comm, args, payload, text)
     if failed is not None:
         raise failed
+
+
+def _check_modes_paths(args, comm, out_dir: str | None) -> None:
+    """``modes``' outputs (fxflex.io.paths), and --elastodyn naming a file that --out writes."""
+    check_paths(comm, [Output("--out", out_dir, folder=True),
+                       Output("--elastodyn", args.elastodyn)], inputs={"--scene": args.scene})
+    if args.elastodyn is None or out_dir is None:
+        return
+    own = {os.path.realpath(os.path.join(out_dir, f"{stem}_{args.method}.{ext}"))
+           for stem, ext in (("modes", "json"), ("shapes", "csv"), ("shapes", "png"))}
+    if os.path.realpath(args.elastodyn) in own:
+        raise FxflexError(f"--elastodyn and --out: both name {args.elastodyn}; allowed: a "
+                          "different file for each output")
 
 
 #: ``fxflex bench NAME`` modules not named NAME (one per name across the package)

@@ -24,12 +24,14 @@ ElastoDyn blade input file, one value per line followed by its keyword and descr
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from fxflex.analysis.shapes import Shapes, trapezoid_weights
+
 __all__ = ["POWERS", "SHAPES", "Fit", "fit_mode_shape", "polynomial", "elastodyn_section",
-           "write_elastodyn", "choose_modes"]
+           "write_elastodyn", "choose_modes", "fit_modes", "missing_shapes"]
 
 #: the powers of xi ElastoDyn keeps
 POWERS = (2, 3, 4, 5, 6)
@@ -47,21 +49,13 @@ class Fit:
     name: str
     coefficients: np.ndarray
     residual: float
-    mode: int | None = None          # the index of the mode it was fitted to
+    mode: int | None = None          # the mode it was fitted to, 1-based as in the modes table
     frequency_hz: float | None = None
 
     def to_dict(self) -> dict:
         return {"name": self.name, "coefficients": self.coefficients.tolist(),
                 "residual": self.residual, "mode": self.mode,
                 "frequency_hz": self.frequency_hz}
-
-
-def _trapezoid_weights(x: np.ndarray) -> np.ndarray:
-    w = np.zeros_like(x)
-    dx = np.diff(x)
-    w[:-1] += 0.5 * dx
-    w[1:] += 0.5 * dx
-    return w
 
 
 def polynomial(coefficients, xi) -> np.ndarray:
@@ -88,7 +82,7 @@ def fit_mode_shape(x, w, *, name: str = "", length: float | None = None) -> Fit:
     if not np.isfinite(tip) or abs(tip) <= 1e-12 * max(float(np.max(np.abs(w))), 1e-300):
         raise ValueError("the shape has no tip deflection to normalise by")
     w = w / tip
-    weight = _trapezoid_weights(xi)
+    weight = trapezoid_weights(xi)
     A = np.stack([xi**k for k in POWERS], axis=1)
     sq = np.sqrt(weight)[:, None]
     Aw, bw = A * sq, w * sq[:, 0]
@@ -117,14 +111,44 @@ def choose_modes(participation: list[dict], frequencies_hz) -> dict[str, int]:
     return chosen
 
 
+def missing_shapes(participation: list[dict], frequencies_hz) -> list[str]:
+    """The SHAPES (as "flap 2 (BldFl2Sh: the 2nd out-of-plane mode)") that
+    :func:`choose_modes` finds no mode for."""
+    chosen = choose_modes(participation, frequencies_hz)
+    ordinal = {1: "1st", 2: "2nd"}
+    return [f"{description.lower()} ({stem}: the {ordinal[n]} {family} mode)"
+            for stem, description, family, n, _ in SHAPES if stem not in chosen]
+
+
+def fit_modes(shapes: Shapes, frequencies_hz, length: float) -> list[Fit]:
+    """The three fits of SHAPES to the modes ``shapes`` (:class:`~fxflex.analysis.shapes.Shapes`,
+    with their frequencies): flap 1 and 2 to the out-of-plane translation u_Z of the 1st and 2nd
+    out-of-plane modes, edge 1 to the in-plane u_Y of the 1st in-plane mode (:func:`choose_modes`),
+    x / ``length`` the normalised span. ValueError naming the shapes no mode was found for, or
+    why a fit failed."""
+    missing = missing_shapes(shapes.participation, frequencies_hz)
+    if missing:
+        raise ValueError("no mode for " + ", ".join(missing))
+    chosen = choose_modes(shapes.participation, frequencies_hz)
+    fits = []
+    for stem, description, _, _, component in SHAPES:
+        j = chosen[stem]
+        try:
+            fit = fit_mode_shape(shapes.x, shapes.u[j, :, component], name=stem, length=length)
+        except ValueError as exc:
+            raise ValueError(f"{description.lower()} ({stem}, mode {j + 1}): {exc}") from None
+        fits.append(replace(fit, mode=j + 1, frequency_hz=float(frequencies_hz[j])))
+    return fits
+
+
 def elastodyn_section(fits: list[Fit], comment: str = "") -> str:
     """The "BLADE MODE SHAPES" section of an ElastoDyn blade file for flap 1, flap 2 and edge 1
-    (in SHAPES order; ``fits`` named by their keyword stems)."""
+    (in SHAPES order; ``fits`` named by their keyword stems). A ``comment`` goes into the
+    section's header line, which ElastoDyn reads as a comment: it reads the section's lines in
+    order, so a comment line of its own could be taken for BldFl1Sh(2)."""
     by_name = {f.name: f for f in fits}
-    title = " BLADE MODE SHAPES "
-    lines = ["-" * 22 + title + "-" * (80 - 22 - len(title))]
-    if comment:
-        lines.append(f"! {comment}")
+    title = f" BLADE MODE SHAPES ({comment}) " if comment else " BLADE MODE SHAPES "
+    lines = ["-" * 22 + title + "-" * max(80 - 22 - len(title), 3)]
     for stem, description, _, _, _ in SHAPES:
         fit = by_name[stem]
         for j, (k, c) in enumerate(zip(POWERS, fit.coefficients)):

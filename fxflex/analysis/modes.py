@@ -40,7 +40,8 @@ from fxflex.scene import Scene
 
 __all__ = ["LABELS", "Modes", "direction_labels", "tip_radius", "modes_of", "speed_builder",
            "campbell", "CampbellData", "plot_campbell", "parse_range",
-           "check_speeds", "sample_of", "campbell_tracked", "tracking_lines"]
+           "check_speeds", "sample_of", "campbell_tracked", "tracking_lines", "EXPORT_PAIRS",
+           "modes_for_export", "elastodyn_export", "single_speed", "run_modes"]
 
 LABELS = ("axial", "in-plane", "out-of-plane", "torsion")
 
@@ -455,16 +456,122 @@ def _log_warnings(comm, notes: list[str]) -> None:
             logging.getLogger("fxflex").warning(note)
 
 
+#: ``--elastodyn``: at least this many modes are computed (flap 2 is the 3rd on the paper's blade
+#: and on a uniform cantilever of any section aspect ratio; torsion can come before it)
+EXPORT_PAIRS = 6
+#: and while flap 1, flap 2 or edge 1 is not among them, twice as many, up to this count
+EXPORT_MAX_PAIRS = 48
+ELASTODYN_NOT_CAMPBELL = ("--elastodyn: not with --campbell (the shapes are fitted at one speed, "
+                          "the scene's); allowed: --elastodyn with --rpm R")
+
+
+def modes_for_export(compute, pairs: int, export: bool):
+    """``compute(n)``: the result for ``n`` modes (a :class:`Modes`, or a tuple whose first item
+    is one). Without ``export``, ``compute(pairs)``. With it (``--elastodyn``) max(pairs,
+    EXPORT_PAIRS) modes, doubled up to EXPORT_MAX_PAIRS while the modes of flap 1, flap 2 or
+    edge 1 (:func:`fxflex.analysis.elastodyn.choose_modes`) are not among them and the model has
+    more: the export finds its modes whatever ``--n`` is, and every mode computed is reported."""
+    from fxflex.analysis.elastodyn import missing_shapes
+
+    n = max(pairs, EXPORT_PAIRS) if export else pairs
+    while True:
+        result = compute(n)
+        modes = result[0] if isinstance(result, tuple) else result
+        if (not export or len(modes.labels) < n or n >= EXPORT_MAX_PAIRS
+                or not missing_shapes(modes.participation, modes.frequencies_hz)):
+            return result
+        n = min(2 * n, EXPORT_MAX_PAIRS)
+
+
+def elastodyn_export(modes: Modes, scene: Scene, path: str) -> tuple[list, dict, list[str]]:
+    """(fits, the JSON member ``elastodyn``, text lines) of the ElastoDyn mode shapes fitted to
+    ``modes`` (:func:`fxflex.analysis.elastodyn.fit_modes`); FxflexError naming a shape that
+    has no mode or cannot be fitted. ``mode`` is 1-based as in the table and the shapes CSV."""
+    from fxflex.analysis.elastodyn import SHAPES, fit_modes, missing_shapes
+    from fxflex.errors import FxflexError
+
+    missing = missing_shapes(modes.participation, modes.frequencies_hz)
+    if missing:
+        found = ", ".join(f"{modes.labels.count(lab)} {lab}" for lab in LABELS
+                          if lab in modes.labels) or "none"
+        raise FxflexError(f"--elastodyn: no mode for {', '.join(missing)} among the "
+                          f"{len(modes.labels)} modes computed ({found}); allowed: a scene whose "
+                          "lowest modes include flap 1, flap 2 and edge 1")
+    try:
+        fits = fit_modes(modes.shapes, modes.frequencies_hz, scene.geometry.length)
+    except ValueError as exc:
+        raise FxflexError(f"--elastodyn: {exc}") from None
+    member = {"file": os.path.abspath(path), "rpm": scene.rotation.rpm,
+              "length_m": scene.geometry.length, "shapes": {}}
+    lines = [f"  ElastoDyn mode shapes (polynomials in x / {scene.geometry.length:g} m, "
+             f"coefficients of x^2..x^6 summing to 1):"]
+    for fit, (stem, description, family, _, component) in zip(fits, SHAPES):
+        j = fit.mode - 1
+        member["shapes"][stem] = {**fit.to_dict(), "description": description,
+                                  "family": family, "component": "XYZ"[component],
+                                  "imag_ratio": float(modes.shapes.imag_ratio[j])}
+        lines.append(f"    {stem}  {description}: mode {fit.mode} ({fit.frequency_hz:.4g} Hz), "
+                     f"u_{'XYZ'[component]}, residual {fit.residual:.2g}")
+    lines.append(f"  written: {member['file']}")
+    return fits, member, lines
+
+
+def single_speed(method: str, scene: Scene, comm, modes: Modes, dof: int, timings: dict,
+                 out_dir: str | None, elastodyn: str | None, *, head: str, tail: str = "",
+                 fields: dict | None = None) -> tuple[dict, str]:
+    """``fxflex modes`` at one speed, with or without ``--tol`` (``fields``: its
+    ``error_estimate`` and ``discretisation``): the payload (SPEC sections 8 and 10, and
+    ``elastodyn``, null without the export), the text (``head``, the table, the verdict followed
+    by ``tail``) and, from rank 0, the ElastoDyn file (written whole or not at all) and in
+    ``out_dir`` ``modes_<method>.json``, ``shapes_<method>.csv`` and ``shapes_<method>.png``."""
+    import json
+
+    from fxflex.analysis.elastodyn import write_elastodyn
+    from fxflex.analysis.shapes import plot_shapes, write_shapes_csv
+    from fxflex.io import envelope
+
+    fits, member, export_lines = (elastodyn_export(modes, scene, elastodyn)
+                                  if elastodyn is not None else (None, None, []))
+    payload = envelope(scene, method=method, dof=dof,
+                       damping={"c": scene.damping.c, "model": scene.damping.model},
+                       n=len(modes.labels), **modes.to_dict(), elastodyn=member,
+                       timings_s=timings, **(fields or {}))
+    text = [head, *modes_table(modes), f"  stable: {modes.stable}{tail}", *export_lines,
+            *(f"  WARNING: {note}" for note in modes.warnings)]
+    _log_warnings(comm, modes.warnings)
+    if comm.rank != 0:
+        return payload, "\n".join(text)
+    if fits is not None:
+        write_elastodyn(member["file"], fits, f"fxflex {method}, {scene.rotation.rpm:g} rpm")
+    if out_dir is not None:
+        os.makedirs(out_dir, exist_ok=True)
+        path = os.path.join(out_dir, f"modes_{method}.json")
+        with open(path, "w") as fh:
+            json.dump(payload, fh, indent=1)
+        text.append(f"  written: {path}")
+        if modes.shapes is not None:
+            stem = os.path.join(out_dir, f"shapes_{method}")
+            write_shapes_csv(modes.shapes, stem + ".csv")
+            plot_shapes(modes.shapes, stem + ".png", modes.frequencies_hz,
+                        f"{method.upper()} mode shapes at {scene.rotation.rpm:g} rpm "
+                        f"(largest translation 1)")
+            text.append(f"  written: {stem}.csv, {stem}.png")
+    return payload, "\n".join(text)
+
+
 def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spec: str | None,
-              out_dir: str | None) -> tuple[dict, str]:
+              out_dir: str | None, elastodyn: str | None = None) -> tuple[dict, str]:
     """``fxflex modes``: (JSON payload with the envelope, human-readable text). Files go to
-    ``out_dir`` from rank 0: the Campbell PNG, CSV and JSON, or ``modes_<method>.json``."""
+    ``out_dir`` from rank 0: the Campbell PNG, CSV and JSON, or those of :func:`single_speed`;
+    ``elastodyn`` (one speed only) the ElastoDyn file's path."""
     from fxflex.errors import FxflexError
     from fxflex.formulation import build
     from fxflex.io import envelope
 
     speeds = None
     if campbell_spec is not None:
+        if elastodyn is not None:
+            raise FxflexError(ELASTODYN_NOT_CAMPBELL)
         try:
             lo, hi, count = parse_range(campbell_spec)
         except ValueError as exc:
@@ -478,35 +585,14 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
         t0 = time.perf_counter()
         form = build(method, scene, comm, options)
         t1 = time.perf_counter()
-        modes = modes_of(form, pairs)
+        modes = modes_for_export(lambda n: modes_of(form, n), pairs, elastodyn is not None)
         timings = {"preprocess": t1 - t0, "solve": time.perf_counter() - t1}
-        payload = envelope(scene, method=method, dof=form.dof,
-                           damping=damping, n=len(modes.labels), **modes.to_dict(),
-                           timings_s=timings)
-        text = [f"{method} modes about the steady state at {scene.rotation.rpm:g} rpm (dof "
-                f"{form.dof}, damping c = {scene.damping.c:g} {scene.damping.model})",
-                *modes_table(modes),
-                f"  stable: {modes.stable}   preprocess {timings['preprocess']:.2f} s, "
-                f"steady state + eigenvalues {timings['solve']:.2f} s",
-                *(f"  WARNING: {note}" for note in modes.warnings)]
-        _log_warnings(comm, modes.warnings)
-        if out_dir is not None and comm.rank == 0:
-            import json
-
-            from fxflex.analysis.shapes import plot_shapes, write_shapes_csv
-            os.makedirs(out_dir, exist_ok=True)
-            path = os.path.join(out_dir, f"modes_{method}.json")
-            with open(path, "w") as fh:
-                json.dump(payload, fh, indent=1)
-            text.append(f"  written: {path}")
-            if modes.shapes is not None:
-                stem = os.path.join(out_dir, f"shapes_{method}")
-                write_shapes_csv(modes.shapes, stem + ".csv")
-                plot_shapes(modes.shapes, stem + ".png", modes.frequencies_hz,
-                            f"{method.upper()} mode shapes at {scene.rotation.rpm:g} rpm "
-                            f"(largest translation 1)")
-                text.append(f"  written: {stem}.csv, {stem}.png")
-        return payload, "\n".join(text)
+        head = (f"{method} modes about the steady state at {scene.rotation.rpm:g} rpm (dof "
+                f"{form.dof}, damping c = {scene.damping.c:g} {scene.damping.model})")
+        tail = (f"   preprocess {timings['preprocess']:.2f} s, steady state + eigenvalues "
+                f"{timings['solve']:.2f} s")
+        return single_speed(method, scene, comm, modes, form.dof, timings, out_dir, elastodyn,
+                            head=head, tail=tail)
 
     done = []
 
