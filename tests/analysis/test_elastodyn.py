@@ -1,5 +1,5 @@
 """ElastoDyn mode-shape polynomials (SPEC section 10) against the closed-form cantilever modes,
-and ``fxflex modes --elastodyn FILE`` through the command line (its file, its JSON, its refusals)."""
+and ``fxflex modes --elastodyn FILE`` through the command line (file, JSON, refusals)."""
 
 import json
 import subprocess
