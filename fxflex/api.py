@@ -229,16 +229,23 @@ def modes(form: Formulation, n: int = 10) -> Modes:
 
 
 def campbell(method: str, speeds: Sequence[float], scene: Scene | None = None, n: int = 10,
-             comm=None, *, progress: Callable | None = None, **options) -> CampbellData:
-    """Modes at each of ``speeds`` (rpm): the data of ``fxflex modes --campbell`` (without its
-    files; :func:`fxflex.analysis.modes.plot_campbell` draws it). ``data.modes[i]`` are the
-    :func:`modes` at ``speeds[i]``, ``data.table()`` the frequencies and growth rates as arrays,
-    ``data.unstable_ranges()`` the speed ranges with an unstable equilibrium. FFRF and GCMS
-    share one build's mesh and clamped modes across speeds. ``progress(i, modes)`` is called
-    after each speed; ``options`` as for :func:`build`."""
+             comm=None, *, progress: Callable | None = None, track: bool = True,
+             **options) -> CampbellData:
+    """Modes at each of ``speeds`` (rpm, increasing), followed from speed to speed by MAC: the
+    data of ``fxflex modes --campbell`` without its files
+    (:func:`fxflex.analysis.modes.plot_campbell` draws them as the CLI's PNG).
+    ``data.modes[i]`` are the :func:`modes` at ``speeds[i]``,
+    ``data.table()`` the frequencies and growth rates as arrays, ``data.unstable_ranges()`` the
+    speed ranges with an unstable equilibrium, ``data.tracking`` the tracked branches
+    (:class:`fxflex.analysis.tracking.Tracking`: ``rpm`` with the speeds refined where a MAC fell
+    below 0.9, ``branches`` with their labels, frequencies, growth rates, damping ratios and MAC,
+    ``resonances``, ``to_dict()`` the CLI's JSON fields). ``track=False``: the modes only, sorted
+    by frequency at each speed (any order of speeds, ``data.tracking`` None). FFRF and GCMS share
+    one build's mesh and clamped modes across speeds. ``progress(i, modes)`` is called after
+    each of ``speeds``; ``options`` as for :func:`build`."""
     import numpy as np
 
-    from fxflex.analysis.modes import CampbellData, check_speeds, speed_builder
+    from fxflex.analysis.modes import CampbellData, campbell_tracked, check_speeds, speed_builder
     from fxflex.analysis.modes import campbell as _campbell
     from fxflex.formulation import check_options
 
@@ -250,9 +257,23 @@ def campbell(method: str, speeds: Sequence[float], scene: Scene | None = None, n
     rpm = np.asarray(speeds, dtype=float)
     if rpm.ndim != 1 or rpm.size == 0:
         raise FxflexError(f"speeds: expected a non-empty list of speeds (rpm), got {speeds!r}")
+    if track and np.any(np.diff(rpm) <= 0.0):
+        raise FxflexError(f"speeds: the branches are followed in increasing speed, got "
+                          f"{rpm.tolist()}; allowed: increasing speeds, or track=False")
     check_speeds(scene, rpm)
-    data = _campbell(speed_builder(method, scene, _comm(comm), opts), rpm, n, progress)
-    return CampbellData(method, rpm, data)
+    build_at = speed_builder(method, scene, _comm(comm), opts)
+    if not track:
+        return CampbellData(method, rpm, _campbell(build_at, rpm, n, progress))
+    done: list = []
+
+    def step(sample):               # the requested speeds come in order, refined ones between
+        if sample.requested:
+            done.append(sample.modes)
+            if progress is not None:
+                progress(len(done) - 1, sample.modes)
+
+    tracking = campbell_tracked(build_at, rpm, n, method, step)
+    return CampbellData(method, rpm, done, tracking)
 
 
 def compare(scene: Scene | None = None, methods: Iterable[str] | None = None,

@@ -191,9 +191,14 @@ def check_speeds(scene: Scene, speeds) -> None:
 
 @dataclass
 class CampbellData:
+    """The modes at the requested speeds ``rpm`` and, when they were followed by MAC, the
+    tracked branches (:class:`fxflex.analysis.tracking.Tracking`, over the requested and the
+    refined speeds)."""
+
     method: str
     rpm: np.ndarray                 # (s,)
     modes: list[Modes]
+    tracking: object | None = None
 
     def table(self) -> tuple[np.ndarray, np.ndarray, list[list[str]]]:
         """(frequencies_hz (s, k), growth_rates (s, k), labels) padded with NaN / '' where a
@@ -286,12 +291,13 @@ def plot_campbell(data: CampbellData, path: str, tracking=None) -> None:
     speed ranges where the equilibrium is unstable shaded (PNG, matplotlib Agg). With the
     ``tracking`` of :func:`fxflex.analysis.tracking.track` the lines are its branches (coloured by
     family, one line style per ordinal) and a black ring marks each speed where a branch's MAC to
-    the previous speed stayed below the threshold; without it, the j-th lowest mode of each
-    direction is joined from speed to speed."""
+    the previous speed stayed below the threshold (default: ``data.tracking``); without any, the
+    j-th lowest mode of each direction is joined from speed to speed."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    tracking = data.tracking if tracking is None else tracking
     fig, ax = plt.subplots(figsize=(7.5, 5.0))
     for lo, hi in data.unstable_ranges():
         ax.axvspan(lo, hi, color="tab:red", alpha=0.15, lw=0)
@@ -617,7 +623,7 @@ def run_modes(method: str, scene: Scene, comm, options, pairs: int, campbell_spe
     tracking = campbell_tracked(speed_builder(method, scene, comm, options), speeds, pairs,
                                 method, progress)
     modes = [s.modes for s in tracking.samples if s.requested]
-    data = CampbellData(method, speeds, modes)
+    data = CampbellData(method, speeds, modes, tracking)
     ranges = data.unstable_ranges()
     payload = envelope(scene, method=method, damping=damping, n=pairs, campbell={
         "rpm": speeds.tolist(), "frequencies_hz": [m.frequencies_hz.tolist() for m in modes],

@@ -204,3 +204,46 @@ def test_tlf_mass_products_are_the_linearisation_mass(mass):
     assert np.abs(MX - ref).max() <= 1e-12 * scale
     mac = mac_matrix(X, MX, X, MX, form.comm)
     np.testing.assert_allclose(np.diag(mac), 1.0, rtol=1e-12)
+
+
+def test_api_campbell_gives_the_tracked_branches():
+    """fxflex.campbell follows the modes by MAC as ``modes --campbell`` does (the same
+    computation: campbell_tracked on speed_builder); progress once per requested speed."""
+    import fxflex
+
+    speeds = np.linspace(0.0, 12000.0, 7)
+    seen = []
+    data = fxflex.campbell("lebb", speeds, n=4, comm=COMM,
+                           progress=lambda i, m: seen.append((i, m.rpm)))
+    ref = tracked("lebb", speeds, 4)
+    assert data.tracking.to_dict() == ref.to_dict()
+    assert data.tracking.refined > 0                 # LEBB's divergence refines the step
+    assert seen == [(i, rpm) for i, rpm in enumerate(speeds)]
+    assert list(data.rpm) == list(speeds) and [m.rpm for m in data.modes] == list(speeds)
+    for m, s in zip(data.modes, (s for s in ref.samples if s.requested)):
+        assert np.array_equal(m.eigenvalues, s.modes.eigenvalues)
+    plain = fxflex.campbell("lebb", speeds[::-1], n=4, comm=COMM, track=False)
+    assert plain.tracking is None and [m.rpm for m in plain.modes] == list(speeds[::-1])
+    with pytest.raises(fxflex.FxflexError, match="increasing speeds, or track=False"):
+        fxflex.campbell("lebb", speeds[::-1], n=4, comm=COMM)
+
+
+@pytest.mark.serial     # spawns the CLI
+def test_api_campbell_branches_are_the_cli_s(tmp_path):
+    import fxflex
+
+    r = subprocess.run([sys.executable, "-m", "fxflex", "modes", "--method", "lebb",
+                        "--campbell", "0:12000:7", "--n", "4", "--out", str(tmp_path),
+                        "--json"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    cli = json.loads(r.stdout)
+    api = fxflex.campbell("lebb", np.linspace(0.0, 12000.0, 7), n=4).tracking.to_dict()
+    assert cli["rpm"] == api["rpm"]              # the same refined speeds
+    assert [(b["label"], b["directions"]) for b in cli["branches"]] == [
+        (b["label"], b["directions"]) for b in api["branches"]]
+    # two processes, the same dense eigensolve: equal far beyond what the tracking resolves
+    for b, c in zip(cli["branches"], api["branches"]):
+        np.testing.assert_allclose(b["frequencies_hz"], c["frequencies_hz"], rtol=1e-7)
+        np.testing.assert_allclose(b["mac"], c["mac"], rtol=0, atol=1e-7)
+    assert [(x["branch"], x["harmonic"]) for x in cli["resonances"]] == [
+        (x["branch"], x["harmonic"]) for x in api["resonances"]]
