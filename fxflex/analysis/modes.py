@@ -515,6 +515,7 @@ def elastodyn_export(modes: Modes, scene: Scene, path: str) -> tuple[list, dict,
         j = fit.mode - 1
         member["shapes"][stem] = {**fit.to_dict(), "description": description,
                                   "family": family, "component": "XYZ"[component],
+                                  "participation": modes.participation[j][family],
                                   "imag_ratio": float(modes.shapes.imag_ratio[j])}
         lines.append(f"    {stem}  {description}: mode {fit.mode} ({fit.frequency_hz:.4g} Hz), "
                      f"u_{'XYZ'[component]}, residual {fit.residual:.2g}")

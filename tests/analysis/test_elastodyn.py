@@ -176,6 +176,15 @@ def test_cli_export_of_the_uniform_cantilever(tmp_path):
         assert shape["frequency_hz"] == d["frequencies_hz"][j]
 
 
+def _conditioning(xi, weight, c):
+    """(singular values of the weighted powers matrix, the round-off of two KKT solves of the
+    fit on the polynomial's values: normal equations, so eps cond^2 on the coefficients, and
+    |xi^k| <= 1)."""
+    A = np.stack([xi**k for k in POWERS], axis=1) * np.sqrt(weight / np.sum(weight))[:, None]
+    sv = np.linalg.svd(A, compute_uv=False)
+    return sv, 2 * np.finfo(float).eps * (sv[0] / sv[-1]) ** 2 * np.sum(np.abs(c))
+
+
 @pytest.mark.serial
 @pytest.mark.parametrize("n, stem", [(1, "BldFl1Sh"), (2, "BldFl2Sh")])
 def test_cli_fit_matches_the_closed_form_fit(tmp_path, n, stem):
@@ -199,11 +208,7 @@ def test_cli_fit_matches_the_closed_form_fit(tmp_path, n, stem):
     e = norm(w - exact)
     ref = fit_mode_shape(x, exact)
     c = np.array(shape["coefficients"])
-    A = np.stack([xi**k for k in POWERS], axis=1) * np.sqrt(weight / np.sum(weight))[:, None]
-    sv = np.linalg.svd(A, compute_uv=False)
-    # the round-off of the two KKT solves (normal equations: cond(A)^2) on the coefficients,
-    # and so on the polynomial's values (|xi^k| <= 1)
-    slack = 2 * np.finfo(float).eps * (sv[0] / sv[-1]) ** 2 * np.sum(np.abs(c))
+    sv, slack = _conditioning(xi, weight, c)
     assert norm(polynomial(c, xi) - polynomial(ref.coefficients, xi)) <= e + slack
     assert abs(shape["residual"] - ref.residual) <= e + slack
     assert np.linalg.norm(c - ref.coefficients) <= (e + slack) / sv[-1]
@@ -245,3 +250,46 @@ def test_cli_refusals_write_nothing(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m", "s.toml"]
     assert list((tmp_path / "m").iterdir()) == []
     assert scene.read_text() == "[rotation]\nrpm = 0.0\n"
+
+
+#: small meshes for every method (the solids' shapes come from their node layers)
+SMALL = {"lebb": [], "nebb": ["mesh.beam_variant=\"locking-free\""],
+         "ancf": ["mesh.beam_variant=\"locking-free\""],
+         "tlf": ["mesh.solid=[10,2,2]", "mesh.solid_degree=2"],
+         "ffrf": ["mesh.solid=[10,2,2]", "mesh.solid_degree=2"],
+         "gcms": ["mesh.solid=[10,2,2]", "mesh.solid_degree=2", "reduction.gcms_modes=30"]}
+
+
+@pytest.mark.parametrize("method", list(SMALL))
+def test_export_of_every_method_against_the_closed_form(method):
+    """The export's modes and fits on the uniform cantilever at rest, every method: flap 1 and 2
+    are the 1st and 2nd out-of-plane modes, and each flap fit lies within e = ||w - w_exact||
+    (the method's shape error at its stations, weighted RMS at unit tip) of the closed-form
+    mode's fit (the fit is an affine projection in that norm: it does not move shapes apart)."""
+    from mpi4py import MPI
+
+    from fxflex.analysis.modes import elastodyn_export, modes_of
+    from fxflex.formulation import build
+    from fxflex.scene import load_scene
+
+    scene = load_scene(overrides=UNIFORM + SMALL[method])
+    modes = modes_for_export(lambda n: modes_of(build(method, scene, MPI.COMM_WORLD), n), 2,
+                             True)
+    fits, member, _ = elastodyn_export(modes, scene, "unused.dat")
+    sh = modes.shapes
+    xi = sh.x / scene.geometry.length
+    weight = trapezoid_weights(xi)
+    norm = lambda v: np.sqrt(np.sum(weight * v**2) / np.sum(weight))     # noqa: E731
+    flaps = [j for j, lab in enumerate(modes.labels) if lab == "out-of-plane"]
+    for n, fit in ((1, fits[0]), (2, fits[1])):
+        assert fit.mode - 1 == flaps[n - 1] and np.sum(fit.coefficients) == pytest.approx(1.0)
+        w = sh.u[fit.mode - 1, :, 2] / sh.u[fit.mode - 1, -1, 2]
+        exact = cantilever_mode(n, xi) / cantilever_mode(n, np.array([1.0]))[0]
+        e = norm(w - exact)
+        ref = fit_mode_shape(sh.x, exact, length=scene.geometry.length)
+        slack = _conditioning(xi, weight, fit.coefficients)[1]
+        assert norm(polynomial(fit.coefficients, xi) - polynomial(ref.coefficients, xi)) \
+            <= e + slack
+        assert fit.residual <= ref.residual + e + slack
+    assert member["shapes"]["BldEdgSh"]["family"] == "in-plane"
+    assert modes.labels[fits[2].mode - 1] == "in-plane"
