@@ -719,8 +719,8 @@ def cmd_modes(args, comm) -> None:
     if args.elastodyn is not None and args.campbell:
         raise FxflexError(ELASTODYN_NOT_CAMPBELL)
     out_dir = args.out if args.out is not None else ("out/modes" if args.campbell else None)
-    out_dir = os.path.abspath(out_dir) if out_dir else None
     _check_modes_paths(args, comm, out_dir)
+    out_dir = os.path.abspath(out_dir) if out_dir is not None else None
     if args.tol is not None and args.campbell:
         raise FxflexError("--tol: not with --campbell (one speed at a time); allowed: --tol "
                           "without --campbell")

@@ -240,14 +240,17 @@ def test_cli_refusals_write_nothing(tmp_path):
         "out": (["--out", str(tmp_path / "m"), "--elastodyn",
                  str(tmp_path / "m" / "modes_lebb.json")], "--out"),
         "stations": (["--set", "mesh.beam_elements=3", "--elastodyn", str(path)], "at least 5"),
+        "device": (["--elastodyn", "/dev/full"], "not a regular file"),
+        "link": (["--scene", str(scene), "--elastodyn", str(tmp_path / "link.dat")], "--scene"),
     }
+    (tmp_path / "link.dat").symlink_to("s.toml")
     for name, (args, needle) in cases.items():
         r = fx(*_uniform(*args))
         lines = r.stderr.strip().splitlines()
         assert r.returncode == 2, (name, r.stderr)
         assert len(lines) == 1 and "--elastodyn" in lines[0] and needle in lines[0], name
         assert r.stdout == "", name
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["m", "s.toml"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.dat", "m", "s.toml"]
     assert list((tmp_path / "m").iterdir()) == []
     assert scene.read_text() == "[rotation]\nrpm = 0.0\n"
 
