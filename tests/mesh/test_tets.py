@@ -5,8 +5,8 @@ span stations exist between the root and tip planes.
 
 The meshes are :func:`fxflex.mesh.tetra.write_tet_blade` files written once per module into
 tmp_path; the hexahedral side is the built-in mesh of the rectangle given as a polygon section,
-which uses the imported meshes' load and tip conventions (:mod:`fxflex.mesh.tet_study`).
-Discretisation errors quoted below are from ``python -m fxflex.mesh.tet_study --sizes
+which uses the imported meshes' load and tip conventions (:mod:`fxflex.bench.tets`).
+Discretisation errors quoted below are from ``python -m fxflex.bench.tets --sizes
 0.06,0.05 --levels 1,2,3`` (docs/sections.md): tip deflection against the Q2 Richardson
 extrapolation, P2 tetrahedra of size 0.05 2.9e-3, Q2 16x4x4 2.7e-3; the four lowest
 frequencies, P2 size 0.05 within 0.03 % and Q2 16x4x4 within 0.1 % of Q2 24x6x6."""
@@ -19,7 +19,7 @@ from mpi4py import MPI
 from fxflex.analysis.modes import modes_of
 from fxflex.formulation import BuildOptions, build
 from fxflex.mesh.geometry import BeamShape
-from fxflex.mesh.tet_study import hex_scene, tet_scene
+from fxflex.bench.tets import hex_scene, tet_scene
 from fxflex.scene import Scene
 from fxflex.solid.lumping import hrz_lumped_mass
 from fxflex.solid.model import SolidModel

@@ -13,7 +13,7 @@ that extrapolation, their observed order the least-squares slope against the mea
 speed, and central difference's critical step with the lumped mass (row sums on Q2, HRZ on the
 quadratic tetrahedra) from the clamped body's w_max.
 
-    python -m fxflex.mesh.tet_study [--rpm 1000] [--sizes 0.04,0.03,0.02] [--levels 2,3,4]
+    python -m fxflex.bench.tets [--rpm 1000] [--sizes 0.04,0.03,0.02] [--levels 2,3,4]
 
 Serial; prints a Markdown table.
 """
@@ -81,7 +81,7 @@ def main(argv=None) -> None:
     from fxflex.analysis.reference import extrapolate, relative_error
     from fxflex.mesh.tetra import write_tet_blade
 
-    parser = argparse.ArgumentParser(prog="python -m fxflex.mesh.tet_study")
+    parser = argparse.ArgumentParser(prog="python -m fxflex.bench.tets")
     parser.add_argument("--rpm", type=float, default=1000.0)
     parser.add_argument("--sizes", default="0.04,0.03,0.02")
     parser.add_argument("--levels", default="2,3,4")
