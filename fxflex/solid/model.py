@@ -171,20 +171,34 @@ class SolidModel:
         return self.rho * ufl.inner(ones, self.u_test) * self.dx
 
     def lumped_mass(self) -> np.ndarray:
-        """The owned entries of the lumped (row-sum) mass, checked positive.
+        """The owned entries of the lumped mass, checked positive: the row sums of the
+        consistent mass, or HRZ (:mod:`fxflex.solid.lumping`) on 10-node tetrahedra, whose
+        vertex row sums are negative (-rho V_e / 20).
 
         Q1 row sums are positive on any valid hexahedron. For the 27-node Q2 element they are the
         tensor products of the 1-D Simpson weights (1/6, 2/3, 1/6) h times rho |det J| on an affine
         cell, so positive as well, but a strongly curved cell could make one zero or negative;
         central differences would then divide by it, so that is refused (FxflexError) rather than
-        run."""
-        m = self.vector(self.lumped_mass_form(), zero_clamped=False).getArray()[: self.n_owned]
+        run. Every user of a lumped mass (the explicit TLF, its w_max, the lumped linearisation of
+        :mod:`fxflex.solid.rotating`) takes it from here."""
+        if self.hrz_lumping:
+            from fxflex.solid.lumping import hrz_lumped_mass
+            m = hrz_lumped_mass(self)
+        else:
+            m = self.vector(self.lumped_mass_form(), zero_clamped=False).getArray()[: self.n_owned]
         low = self.comm.allreduce(float(m.min()) if m.size else np.inf, op=MPI.MIN)
         if not low > 0.0:
-            raise FxflexError(f"mesh.solid_degree = {self.degree}: the lumped (row-sum) mass has "
+            how = "HRZ" if self.hrz_lumping else "row-sum"
+            raise FxflexError(f"mesh.solid_degree = {self.degree}: the lumped ({how}) mass has "
                               f"an entry {low:.3g} <= 0 on mesh.solid {list(self.divisions)}; "
                               f"allowed: --mass consistent, or a finer mesh")
         return m.copy()
+
+    @property
+    def hrz_lumping(self) -> bool:
+        """True where :meth:`lumped_mass` is HRZ's: quadratic tetrahedra (on linear ones HRZ is
+        the row sum, m_e / 4 per vertex)."""
+        return self.solid_mesh.kind == "tetrahedra" and self.degree == 2
 
     def mass_P_form(self):
         return forms.mass_P(self.rho, self.u_trial, self.u_test, self.dx)
@@ -318,17 +332,21 @@ class SolidModel:
 
     def span_sections(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(x, S) for the columns of owned-entry arrays X (n_owned, k), real or complex: x (s,)
-        the node layers' distances from the root and S (4, s, k) the translation X, Y, Z of
-        each layer's section centroid and its rotation about X (SPEC section 10).
+        the stations' distances from the root and S (4, s, k) the translation X, Y, Z of each
+        station's section centroid and its rotation about X (SPEC section 10).
 
-        :meth:`tip_section` generalised to every layer: the least-squares rigid fit
-        u_i ~ t + theta x r_i over the layer's nodes, r_i = X_i - c with c the centroid on the
-        X axis (SPEC section 9), i.e. the 6 x 6 normal equations sum_i A_i^T A_i (t, theta) =
-        sum_i A_i^T u_i with A_i = [1, -[r_i]x]. A layer is the nodes that share an X (to
-        1e-6 of the length); layers whose nodes cannot fix a rigid motion (fewer than three
-        off one line: an imported tetrahedral mesh between its root and tip planes) are left
-        out. The fit is one sparse (6 s, n_owned) operator per rank, built on the first call;
-        the products are summed over the ranks, so every rank gets the same result.
+        :meth:`tip_section` generalised to every station: the least-squares rigid fit
+        u_i ~ t + theta x r_i over the station's nodes, r_i = X_i - c with c the centroid on the
+        X axis (SPEC section 9) at the node's own X, i.e. the 6 x 6 normal equations
+        sum_i A_i^T A_i (t, theta) = sum_i A_i^T u_i with A_i = [1, -[r_i]x]. A station is a node
+        layer (the nodes that share an X to 1e-6 of the length, at least half as many as the
+        largest layer, and able to fix a rigid motion): every layer of the generated hexahedral
+        meshes. The nodes in no such layer (an imported tetrahedral mesh between its root and
+        tip planes) are binned by X into slabs of equal width, as many as give each slab about
+        the mean node count of the layers, and each slab is one more station at its nodes' mean
+        X: a field linear in X over the slab is then fitted at that X to second order in the
+        slab width. The fit is one sparse (6 s, n_owned) operator per rank, built on the first
+        call; the products are summed over the ranks, so every rank gets the same result.
         Collective on ``comm``."""
         x, op = self._span_fit
         X2 = X.reshape(X.shape[0], -1)
@@ -338,6 +356,46 @@ class SolidModel:
         S = S.transpose(1, 0, 2)
         return x, (S if X.ndim == 2 else S[..., 0])
 
+    def _station_normals(self, A: np.ndarray, which: np.ndarray, count: int):
+        """(keep, inverse): which stations' 6 x 6 normal equations fix a rigid motion, and their
+        inverses (zero where not). Collective."""
+        normal = np.zeros((count, 6, 6))
+        np.add.at(normal, which, np.einsum("nci,ncj->nij", A, A))
+        normal = self.comm.allreduce(normal)
+        keep = np.zeros(count, dtype=bool)
+        inverse = np.zeros_like(normal)
+        for j, N in enumerate(normal):
+            ev = np.linalg.eigvalsh(N)
+            if ev[0] > 1e-9 * ev[-1]:
+                keep[j] = True
+                inverse[j] = np.linalg.inv(N)
+        return keep, inverse
+
+    def _slabs(self, x: np.ndarray, which: np.ndarray, keep: np.ndarray, station: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """(station index of each owned node, stations x ascending) with the nodes outside the
+        kept layers binned into slabs (:meth:`span_sections`). Collective."""
+        comm = self.comm
+        loose = ~keep[which]
+        n_loose = comm.allreduce(int(loose.sum()))
+        per_layer = comm.allreduce(int((~loose).sum())) / max(int(keep.sum()), 1)
+        n = max(1, int(round(n_loose / per_layer)))
+        xl = x[loose]
+        lo = comm.allreduce(float(xl.min()) if xl.size else np.inf, op=MPI.MIN)
+        hi = comm.allreduce(float(xl.max()) if xl.size else -np.inf, op=MPI.MAX)
+        slab = np.minimum((n * (xl - lo) / max(hi - lo, 1e-300)).astype(int), n - 1)
+        sums = comm.allreduce(np.bincount(slab, weights=xl, minlength=n))
+        counts = comm.allreduce(np.bincount(slab, minlength=n))
+        full = counts > 0
+        centres = np.concatenate([station[keep], sums[full] / counts[full]])
+        group = np.empty(x.size, dtype=np.int64)
+        group[~loose] = (np.cumsum(keep) - 1)[which[~loose]]
+        group[loose] = int(keep.sum()) + (np.cumsum(full) - 1)[slab]
+        order = np.argsort(centres, kind="stable")
+        rank = np.empty_like(order)
+        rank[order] = np.arange(order.size)
+        return rank[group], centres[order]
+
     @functools.cached_property
     def _span_fit(self):
         """(x, the sparse (6 s, n_owned) fit operator of :meth:`span_sections`). Collective."""
@@ -346,7 +404,8 @@ class SolidModel:
         g = self.scene.geometry
         tol = 1e-6 * g.length
         coords = self.node_coordinates()
-        keys = np.rint((coords[:, 0] - g.hub_radius) / tol).astype(np.int64)
+        x = coords[:, 0] - g.hub_radius
+        keys = np.rint(x / tol).astype(np.int64)
         layers = np.unique(np.concatenate(self.comm.allgather(np.unique(keys))))
         which = np.searchsorted(layers, keys)
         r = coords - np.column_stack([coords[:, 0], np.zeros((len(coords), 2))])
@@ -356,19 +415,16 @@ class SolidModel:
         A[:, 0, 4], A[:, 0, 5] = r[:, 2], -r[:, 1]
         A[:, 1, 3], A[:, 1, 5] = -r[:, 2], r[:, 0]
         A[:, 2, 3], A[:, 2, 4] = r[:, 1], -r[:, 0]
-        normal = np.zeros((layers.size, 6, 6))
-        np.add.at(normal, which, np.einsum("nci,ncj->nij", A, A))
-        normal = self.comm.allreduce(normal)
-        keep = np.zeros(layers.size, dtype=bool)
-        inverse = np.zeros_like(normal)
-        for j, N in enumerate(normal):
-            ev = np.linalg.eigvalsh(N)
-            if ev[0] > 1e-9 * ev[-1]:
-                keep[j] = True
-                inverse[j] = np.linalg.inv(N)
+        keep, inverse = self._station_normals(A, which, layers.size)
+        sizes = self.comm.allreduce(np.bincount(which, minlength=layers.size))
+        keep &= sizes >= sizes.max() / 2
+        station = layers * tol
+        if self.comm.allreduce(int(np.count_nonzero(~keep[which]))):
+            which, station = self._slabs(x, which, keep, station)
+            keep, inverse = self._station_normals(A, which, station.size)
         index = np.cumsum(keep) - 1
         mine = keep[which]
-        # rows 6 index(layer) + a, columns 3 node + c, values (N^-1 A_i^T)[a, c]
+        # rows 6 index(station) + a, columns 3 node + c, values (N^-1 A_i^T)[a, c]
         block = np.einsum("nab,ncb->nac", inverse[which[mine]], A[mine])
         nodes = np.flatnonzero(mine)
         rows = (6 * index[which[mine]])[:, None, None] + np.arange(6)[None, :, None]
@@ -376,7 +432,7 @@ class SolidModel:
         rows, cols = np.broadcast_arrays(rows, cols)
         op = sparse.csr_matrix((block.ravel(), (rows.ravel(), cols.ravel())),
                                shape=(6 * int(keep.sum()), self.n_owned))
-        return layers[keep] * tol, op
+        return station[keep], op
 
     def tip_relative(self, array: np.ndarray, phi: float = 0.0) -> np.ndarray:
         """Rotating-frame deflection U = A^T (x0 + u) - x0 of the tip centre for an inertial

@@ -6,9 +6,9 @@ from the hub and U* the steady state, a perturbation dU obeys
     M dU'' + (2 Omega M_S + D) dU' + (K_T(U*) - Omega^2 M_P [+ (c/rho) Omega M_S]) dU = 0,
 
 - M_B = int rho (B du) . v for the 3 x 3 matrices B = I, S, P of NOTES.md with the consistent mass
-  (Eq. 29), or m_a B on node a with the lumped one (row sums) that the transient integrates: the
-  inertial acceleration A (U'' + 2 Omega S U' - Omega^2 P (X0 + U)) seen through a mass that is
-  isotropic node by node;
+  (Eq. 29), or m_a B on node a with the lumped one that the transient integrates (row sums; HRZ
+  on quadratic tetrahedra, :meth:`SolidModel.lumped_mass`): the inertial acceleration
+  A (U'' + 2 Omega S U' - Omega^2 P (X0 + U)) seen through a mass that is isotropic node by node;
 - D = (c/rho) M: the relative model (Eq. 34) damps the rotating-frame rate U'; the absolute model
   (Eq. 68) damps u' - u_r' = A (U' + Omega S U), which adds the non-symmetric circulatory
   (c/rho) Omega M_S to the stiffness;
@@ -99,7 +99,7 @@ def tlf_matrices(model: SolidModel, U: np.ndarray, omega: float, c_rho: float, a
         return out
 
     if mass == "lumped":
-        m = model.vector(model.lumped_mass_form(), zero_clamped=False).getArray()[: model.n_owned]
+        m = model.lumped_mass()          # HRZ on quadratic tetrahedra, positive
 
         def coupling(B: np.ndarray) -> PETSc.Mat:
             return _nodal(model, m, free, B)
