@@ -134,7 +134,7 @@ def tlf_matrices(model: SolidModel, U: np.ndarray, omega: float, c_rho: float, a
         K.axpy(1.0, inertia, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         inertia.destroy()
     rows.destroy()
-    if body is not None:                 # m (w w^T) (x) B for each M_B, with either mass of the solid
+    if body is not None:                 # m (w w^T) (x) B for each M_B, either mass kind
         at = np.full(model.n_owned, -1, dtype=np.int64)
         at[free] = (model.comm.exscan(free.size) or 0) + np.arange(free.size)
         body.add_to(M, rows=at)
