@@ -41,6 +41,7 @@ __all__ = ["ClampedModes", "clamped_modes", "mass_and_stiffness", "modes_key", "
 
 #: modules whose source decides the modes (with the mesh key): a change makes a new cache entry
 CODE_MODULES = ("fxflex.solid.cms", "fxflex.solid.forms", "fxflex.solid.model",
+                "fxflex.solid.tip_mass",
                 "fxflex.scene.schema", "fxflex.scene.kinematics")
 
 
@@ -69,9 +70,16 @@ class ClampedModes:
 
 
 def mass_and_stiffness(model: SolidModel) -> tuple[PETSc.Mat, PETSc.Mat]:
-    """(K_L, M) assembled with the root clamp: 1 on K_L's clamped diagonal, 0 on M's."""
+    """(K_L, M) assembled with the root clamp: 1 on K_L's clamped diagonal, 0 on M's. M holds
+    the [tip_mass] (:mod:`fxflex.solid.tip_mass`: m (w w^T) (x) I_3 on the tip face), so the
+    clamped modes are those of the solid with its tip body."""
+    from fxflex.solid.tip_mass import tip_body
+
     K = model.matrix(model.compile(model.stiffness_form()))
     M = model.matrix(model.compile(model.mass_form()), diagonal=0.0)
+    body = tip_body(model)
+    if body is not None:
+        body.add_to(M)
     return K, M
 
 
@@ -79,11 +87,14 @@ def modes_key(model: SolidModel, count: int, tol: float) -> str:
     """Cache key of the ``count`` clamped modes of ``model`` (module docstring)."""
     from dataclasses import asdict
 
+    from fxflex.solid.tip_mass import tip_key
+
     return cache.entry_key({
         "kind": "modes", "mesh": model.solid_mesh.key,
         **({"degree": model.degree} if model.degree != 1 else {}),
         "material": asdict(model.scene.material), "quadrature": model.quadrature_degree,
-        "count": int(count), "tol": float(tol), "code": cache.code_version(*CODE_MODULES)})
+        "count": int(count), "tol": float(tol), **tip_key(model.scene),
+        "code": cache.code_version(*CODE_MODULES)})
 
 
 def clamped_modes(model: SolidModel, count: int, *, K: PETSc.Mat | None = None,

@@ -396,6 +396,15 @@ class SolidModel:
         rank[order] = np.arange(order.size)
         return rank[group], centres[order]
 
+    def tip_fit(self):
+        """The (6, n_owned) sparse rows of :meth:`span_sections`' rigid fit for the tip layer
+        (translation of its centroid and small rotation per owned entry; sum over the ranks).
+        Collective on the first call."""
+        x, op = self._span_fit
+        if not abs(x[-1] - self.scene.geometry.length) <= 1e-6 * self.scene.geometry.length:
+            raise FxflexError("tip_mass: the tip face's nodes fix no rigid motion")
+        return op[-6:]
+
     @functools.cached_property
     def _span_fit(self):
         """(x, the sparse (6 s, n_owned) fit operator of :meth:`span_sections`). Collective."""

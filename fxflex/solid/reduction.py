@@ -119,6 +119,7 @@ def mesh_data(model: SolidModel) -> MeshData:
 
     from fxflex.scene.kinematics import P3, S3
     from fxflex.solid.cms import mass_and_stiffness
+    from fxflex.solid.tip_mass import tip_body
 
     t0 = time.perf_counter()
     K, M = mass_and_stiffness(model)
@@ -129,6 +130,11 @@ def mesh_data(model: SolidModel) -> MeshData:
     X0 = model.X0
     J0 = model.comm.allreduce(fem.assemble_scalar(fem.form(
         model.rho * ufl.inner(ufl.dot(ufl.as_matrix(P3.tolist()), X0), X0) * model.dx)))
+    body = tip_body(model)
+    if body is not None:                 # the tip body's rigid-rotation terms (tip_mass.py)
+        f_c += body.load(P3)
+        f_S += body.load(S3)
+        J0 += body.second_moment(P3)
     xyz = model.node_coordinates()
     load_torque = model.comm.allreduce(float(np.sum((xyz @ S3.T) * F.reshape(-1, 3))))
     return MeshData(K=K, M=M, f_c=f_c, f_S=f_S, F=F, J0=float(J0), load_torque=load_torque,
@@ -144,6 +150,7 @@ def reduced_key(scene: Scene, method: str, count: int, **extra) -> str:
     degree, covered by its source)."""
     from fxflex.mesh.solid import mesh_key
     from fxflex.solid.cms import CODE_MODULES
+    from fxflex.solid.tip_mass import tip_key
 
     load = scene.load
     return cache.entry_key({
@@ -152,7 +159,7 @@ def reduced_key(scene: Scene, method: str, count: int, **extra) -> str:
         **({"degree": scene.mesh.solid_degree} if scene.mesh.solid_degree != 1 else {}),
         "material": dataclasses.asdict(scene.material),
         "load": {"line_load": load.line_load, "tip_force": list(load.tip_force)},
-        "count": int(count), **extra,
+        "count": int(count), **tip_key(scene), **extra,
         "code": cache.code_version(*CODE_MODULES, __name__, f"fxflex.solid.{method}")})
 
 

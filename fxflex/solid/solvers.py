@@ -38,7 +38,7 @@ STEP_TOL = 1e-12
 
 def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = None,
            rtol: float = 1e-10, max_it: int = 30, reference: float | None = None,
-           symmetric: bool = True, floor: float = 1e-8) -> NewtonResult:
+           symmetric: bool = True, floor: float = 1e-8, extra=None) -> NewtonResult:
     """Solve residual(u) - rhs = 0 by Newton's method with a MUMPS LDL^T of the exact Jacobian
     (LU when ``symmetric`` is False).
 
@@ -49,7 +49,9 @@ def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = 
     ``STEP_TOL`` of the solution (with a small load the internal force terms cancel, while the
     iterate is exact), or when the residual is already below ``floor`` times ``reference`` and an
     iteration no longer halves it (large meshes; Q2, 187200 unknowns: 1.2e-10 of the first
-    residual, reached in 4 iterations, then 1.47e-7 -> 1.48e-7).
+    residual, reached in 4 iterations, then 1.47e-7 -> 1.48e-7). ``extra``: terms that are not
+    forms (the tip mass, :mod:`fxflex.solid.tip_mass`), an object whose ``residual(u, b)`` and
+    ``jacobian(A)`` add theirs to the assembled b and A.
     """
     from dolfinx.fem.petsc import (assemble_matrix, assemble_vector, create_matrix,
                                    create_vector, set_bc)
@@ -67,6 +69,8 @@ def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = 
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         if rhs is not None:
             b.axpy(-1.0, rhs)
+        if extra is not None:
+            extra.residual(u, b)
         set_bc(b, bcs)
         norm = b.norm()
         out.timings["assemble"] += time.perf_counter() - t0
@@ -85,6 +89,8 @@ def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = 
         A.zeroEntries()
         assemble_matrix(A, J, bcs=bcs)
         A.assemble()
+        if extra is not None:
+            extra.jacobian(A)
         out.timings["assemble"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         ksp.solve(b, du)

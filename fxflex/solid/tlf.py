@@ -171,6 +171,8 @@ class TLF(FormulationBase):
         rhs = d.rhs
         if d.mass == "lumped":
             np.multiply(rhs, d.m_inv, out=out)
+            if d.body is not None:               # (D + M_tip)^-1 (fxflex.solid.tip_mass)
+                d.body.woodbury(out)
         else:
             rhs[d.root] = d.root_combination(alpha, beta)
             for j, (rhs_j, b_arr, x_arr) in enumerate(d.components):
@@ -204,6 +206,8 @@ class TLF(FormulationBase):
         d = self.dynamics
         if d.mass == "lumped":
             np.multiply(x, d.m, out=out)
+            if d.body is not None:
+                d.body.apply(x, out)
         else:
             for j, (_, b_arr, x_arr) in enumerate(d.components):
                 b_arr[:] = x[j::3]

@@ -1,6 +1,7 @@
 """What the TLF time loop touches, built once before it (STYLE habit 4): the internal force route,
 the mass of Eq. 29 (lumped row sums or the factorised consistent mass), the loads, the root-node
-data of the prescribed drive, the damped rate of Eq. 34 / 68, and the work arrays."""
+data of the prescribed drive, the damped rate of Eq. 34 / 68, and the work arrays. A [tip_mass]
+joins the mass (:mod:`fxflex.solid.tip_mass`): the inertial frame needs nothing else."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from scipy.linalg.blas import daxpy
 from fxflex.scene.kinematics import rotation_cs
 from fxflex.solid.model import SolidModel
 from fxflex.solid.solvers import direct_solver
+from fxflex.solid.tip_mass import tip_body
 from fxflex.solid.tlf_force import make_force
 
 if TYPE_CHECKING:
@@ -57,9 +59,12 @@ class Dynamics:
         # mass (Eq. 29)
         t1 = time.perf_counter()
         self.mass = tlf.mass_kind
+        self.body = body = tip_body(model)        # [tip_mass] (fxflex.solid.tip_mass)
         if self.mass == "lumped":
             self.m = model.lumped_mass()          # refused unless every entry > 0
             self.m_inv = 1.0 / self.m
+            if body is not None:                  # (D + M_tip)^-1 by Sherman-Morrison-Woodbury
+                body.diagonal(self.m)
         else:
             Mf = model.compile(model.mass_form())
             M_full = model.matrix(Mf, bcs=[])
@@ -70,6 +75,8 @@ class Dynamics:
             # M = M_s (x) I_3: factorise the scalar mass once (1/9 of the entries) and solve the
             # three components with it
             self.M = scalar_mass(model)
+            if body is not None:                  # m w w^T: the body moves with the fit's t
+                body.add_to(self.M, block=1)
             self.ksp = direct_solver(self.M)
             self.ksp.setUp()                               # factorise once, here
             self.b, self.x = self.M.createVecs()

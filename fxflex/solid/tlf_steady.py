@@ -10,7 +10,8 @@ included). The absolute damping model adds its circulatory (c/rho) Omega int rho
 seen from the hub, SPEC section 5), non-symmetric: Newton then factorises with LU. Above the speed
 where the unstressed K_L - Omega^2 M_P loses definiteness the first Newton step would follow the
 unstable linear mode, so the speed is raised in stages (continuation in Omega^2), each stage
-starting from the previous equilibrium.
+starting from the previous equilibrium. A [tip_mass] adds its centrifugal load on its deformed
+position (and circulatory term) through :class:`fxflex.solid.tip_mass.SteadyTerms`.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from fxflex.formulation import SteadyState
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel
 from fxflex.solid.solvers import newton
+from fxflex.solid.tip_mass import SteadyTerms, tip_body
 
 __all__ = ["tlf_steady"]
 
@@ -49,6 +51,9 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
         w1 = fem.Constant(model.mesh, 0.0)
         R = R + w1 * (damping.c / model.rho) * forms.mass_S(model.rho, U, v, model.dx)
     J = ufl.derivative(R, U, du)
+    body = tip_body(model)                  # [tip_mass]: its terms are not forms
+    extra = None if body is None else SteadyTerms(body, w2, w1 if absolute else None,
+                                                  damping.c / model.rho)
     F_ext = model.rotating_load()
     t_setup = time.perf_counter() - t0
     stages = max(1, math.ceil((omega / _STAGE_OMEGA) ** 2))
@@ -59,7 +64,7 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
         if absolute:
             w1.value = math.sqrt(w2.value)
         res = newton(R, J, U, [model.bc], rhs=F_ext, rtol=rtol, max_it=max_it,
-                     symmetric=not absolute)
+                     symmetric=not absolute, extra=extra)
         residuals = res.residuals
         iterations += res.iterations
         for key in ("assemble", "factor_solve"):

@@ -33,7 +33,9 @@ class HubTangent(HubFrameFactor):
     frame, solves and rotates back. Left out of S_hub: the relative damping's dQ_d/du =
     -(c/rho) phi' M S_d (skew), k c/rho phi' relative to m: 1e-9 at 1000 rpm and dt = 10 us,
     which keeps S symmetric (MUMPS LDL^T) at no cost to Newton's convergence. Root rows and
-    columns are the identity (the prescribed coordinates drop out).
+    columns are the identity (the prescribed coordinates drop out). A [tip_mass] is isotropic
+    node by node too (:mod:`fxflex.solid.tip_mass`): it is added to the assembled matrix here,
+    with either mass of the solid.
     """
 
     def __init__(self, tlf: TLF):
@@ -81,6 +83,8 @@ class HubTangent(HubFrameFactor):
         self.A.zeroEntries()
         assemble_matrix(self.A, self.form, bcs=self.bcs, diagonal=1.0)
         self.A.assemble()
+        if d.body is not None:                   # the tip body's m (w w^T) (x) I_3
+            d.body.add_to(self.A, scale=mass)
         if d.mass == "lumped":
             arr = self.diag.getArray()
             np.multiply(self.m_free, mass, out=arr)
