@@ -30,9 +30,10 @@ tip is still near zero, would otherwise have no scale at all. The estimate repor
 Step control. r is of order h^2 (e ~ h^3, divided by h), so the step that would give r = EPS is
 h (EPS / r)^(1/2); the next step is h f with f = SAFETY (EPS / r)^(1/2) clamped to [0.2, 2]. A
 step with r > EPS is rejected: the state and the scheme's history are restored and the step is
-redone with h f. An accepted step keeps h unless f >= GROW_MIN: every change of h costs a new
-factorisation of the modified Newton matrix (S depends on h), so the step only grows when it
-pays. A step whose Newton iteration fails (the scheme runs without halvings here) counts as a
+redone with h f, and the step after a rejection does not grow. S, the modified Newton matrix,
+depends on h: a factor serves steps within REUSE_RATIO of its own, and the renewal rule of
+:mod:`~fxflex.time.generalized_alpha` (iterations against a factorisation, both measured) decides
+when a new one pays. A step whose Newton iteration fails (the scheme runs without halvings here) counts as a
 rejection with f = 1/4. The step never exceeds ``h_max`` (default T / 50: the estimate assumes
 the step resolves the response) and a step below ``H_FLOOR`` T stops the run as a Newton failure.
 
@@ -58,16 +59,14 @@ import numpy as np
 from fxflex.time.driver import GROWTH_POINTS, RunResult, divergence_limit
 from fxflex.time.generalized_alpha import GeneralizedAlpha, NewtonFailure
 
-__all__ = ["Clock", "simulate_adaptive", "SAFETY", "GROW_MAX", "SHRINK_MIN", "GROW_MIN",
-           "H_FLOOR", "local_error_factor"]
+__all__ = ["Clock", "simulate_adaptive", "explicit_step", "SAFETY", "KAPPA", "GROW_MAX",
+           "SHRINK_MIN", "H_FLOOR", "EXPLICIT_MARGIN", "MAX_EXPLICIT_STEPS", "local_error_factor"]
 
 SAFETY = 0.9
 #: the sum of the local displacement errors against the error of the history it leaves
 #: (module docstring, "Calibration")
 KAPPA = 2.0
 GROW_MAX, SHRINK_MIN = 2.0, 0.2
-#: an accepted step grows only by this factor or more (each change costs a factorisation)
-GROW_MIN = 1.25
 #: the step cut after a Newton failure
 NEWTON_CUT = 0.25
 #: a Newton factor serves steps within this ratio of its own (generalized_alpha.reuse_ratio)
@@ -348,3 +347,48 @@ def _restore(scheme, q, v, q_old, v_old, qdd_old, a_old) -> None:
     np.copyto(v, v_old)
     np.copyto(scheme.qdd, qdd_old)
     np.copyto(scheme.a, a_old)
+
+
+#: explicit schemes under --tol: the step is this share of the critical step
+EXPLICIT_MARGIN = 0.9
+#: explicit schemes under --tol: no run of more steps than this is started
+MAX_EXPLICIT_STEPS = 2_000_000
+
+
+def explicit_step(integrator: str, w_max: float | None, d: float, span: float,
+                  eps: float) -> tuple[float, str]:
+    """(step, rule) of an explicit scheme under ``--tol EPS``; FxflexError when EPS cannot be
+    met at a bounded cost.
+
+    An explicit step is bounded by stability, not by the accuracy of the response: central
+    difference is stable up to h_c = 2 (sqrt(w^2 + d^2) - d) / w^2 on the top mode, and has no
+    spurious growth below it; AB2 has no stability interval on an undamped mode and amplifies
+    it like exp(w^4 h^3 t / 4), so its critical step is the one whose growth of the top mode over
+    the run stays below 1 + EPS (:func:`~fxflex.time.step_stability.critical_step` with the span
+    as the window and log(1 + EPS) as the threshold). The step is EXPLICIT_MARGIN of it (the top
+    frequency is computed on the clamped body or about the equilibrium, and moves with the
+    deformation by about sigma / E). Refused (one line) when that step needs more than
+    MAX_EXPLICIT_STEPS steps: AB2's step shrinks as EPS^(1/3), so a small EPS makes it cost
+    more than any implicit run. The error of the resolved response is not estimated: at the
+    stable step it is a phase error of (w h)^2 / 24 (CD) per radian, small on the modes far
+    below w_max that carry the tip history (docs/tolerance.md)."""
+    from fxflex.errors import FxflexError
+    from fxflex.time.step_stability import critical_step
+
+    if w_max is None:
+        raise FxflexError(f"--tol: {integrator} needs the top frequency of the model, which this "
+                          "formulation does not give; use --integrator generalized-alpha")
+    if integrator == "cd":
+        crit = critical_step("cd", w_max, d)
+        rule = f"{EXPLICIT_MARGIN:g} x the central-difference limit 2 (sqrt(w^2 + d^2) - d) / w^2"
+    else:
+        crit = critical_step("ab2", w_max, d, window=span, log_growth=math.log1p(eps))
+        rule = (f"{EXPLICIT_MARGIN:g} x the AB2 step whose growth of the top mode over the run "
+                f"stays below 1 + EPS")
+    h = EXPLICIT_MARGIN * crit
+    steps = span / h
+    if steps > MAX_EXPLICIT_STEPS:
+        raise FxflexError(f"--tol {eps:g}: {integrator} would need {steps:.3g} steps of "
+                          f"{h:.3g} s ({rule}; w_max = {w_max:.4g} rad/s), more than the cap of "
+                          f"{MAX_EXPLICIT_STEPS:g}; use --integrator generalized-alpha")
+    return h, rule
