@@ -175,6 +175,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", metavar="CHECKPOINT",
                    help="continue the run a checkpoint belongs to (same scene and run options): "
                         "the series is cut back to the checkpoint and appended")
+    _tolerance(p, "the tip history's time-integration error relative to its peak, by "
+                  "adaptive generalized-alpha steps; the mesh as steady --tol chooses it unless "
+                  "the scene sets it")
     _common(p)
 
     p = sub.add_parser("modes", help="modes and stability of the motion about the rotating "
@@ -419,6 +422,10 @@ class _RunPlan:
     arrays: dict | None
     series: dict | None
     warnings: list[str]
+    #: --tol: EPS, the sample interval and the checkpoint interval in time (variable steps)
+    tol: float | None = None
+    sample_dt: float | None = None
+    ckpt_dt: float | None = None
 
 
 def _run_integration(args, scene, comm, warnings: list[str]
@@ -441,7 +448,13 @@ def _plan_run(args, scene, comm) -> _RunPlan:
     from fxflex.time.driver import sample_steps
 
     warnings: list[str] = []
-    integrator, dt, nsteps, rho_inf = _run_integration(args, scene, comm, warnings)
+    if args.tol is None:
+        if args.tol_levels is not None:
+            raise FxflexError("--tol-levels: only with --tol EPS")
+        integrator, dt, nsteps, rho_inf = _run_integration(args, scene, comm, warnings)
+    else:
+        integrator, dt, nsteps, rho_inf = _tol_integration(args, scene)
+    adaptive = args.tol is not None and integrator == "generalized-alpha"
     if args.fields_every < 1:
         raise FxflexError(f"--fields-every: must be >= 1, got {args.fields_every}")
     if args.checkpoint_every is not None and args.checkpoint_every < 1:
@@ -458,26 +471,118 @@ def _plan_run(args, scene, comm) -> _RunPlan:
             raise FxflexError("--out: the checkpointed run wrote no series; resume without --out")
         out_path = args.out if args.out is not None else (series["path"] if series else None)
     sample_every = sample_steps(dt, args.t_end, args.sample_dt)
+    sample_dt = ckpt_dt = None
+    if adaptive:                    # rows at the asked times, interpolated (fxflex.time.adaptive)
+        from fxflex.formulation import implicit_step
+        sample_dt = args.sample_dt or implicit_step(args.method, scene.rotation.rpm)
+        sample_every = None
     if not (out_path or args.fields):
         sample_every = nsteps       # nothing to write: only the final deflection is reported
+        sample_dt = args.t_end if adaptive else None
     settings = {"method": args.method, "integrator": integrator, "dt_s": dt,
                 "t_end_s": args.t_end, "t0_s": 0.0, "sample_every": sample_every,
-                "rho_inf": rho_inf}
+                "rho_inf": rho_inf, "tol": args.tol}
+    if adaptive:
+        settings["sample_dt_s"] = sample_dt
     if resumed is not None:
-        check_settings(resumed, scene.to_dict(), scene.hash, settings, args.resume)
+        if args.tol is None:        # with --tol the scene is checked once the mesh is chosen
+            check_settings(resumed, scene.to_dict(), scene.hash, settings, args.resume)
         ckpt_path = ckpt_path or resumed["checkpoint"]["path"]
         ckpt_every = ckpt_every or resumed["checkpoint"]["every"]
+        ckpt_dt = resumed["checkpoint"].get("every_s") if ckpt_every is None else None
     if ckpt_every is not None and ckpt_path is None:
         if not out_path:
             raise FxflexError("--checkpoint-every: needs --checkpoint FILE (or --out FILE.csv, "
                               "whose name + .ckpt is then used)")
         ckpt_path = out_path + ".ckpt"
-    if ckpt_path is not None and ckpt_every is None:
-        ckpt_every = max(nsteps // 20, 1)         # every 5 % of the run
+    if ckpt_path is not None and ckpt_every is None and ckpt_dt is None:
+        if adaptive:
+            ckpt_dt = args.t_end / 20             # every 5 % of the run, in time
+        else:
+            ckpt_every = max(nsteps // 20, 1)     # every 5 % of the run
     plan = _RunPlan(integrator, dt, nsteps, rho_inf, sample_every, settings, out_path, ckpt_path,
-                    ckpt_every, resumed, arrays, series, warnings)
+                    ckpt_every, resumed, arrays, series, warnings, args.tol, sample_dt, ckpt_dt)
     _check_run_paths(args, comm, plan)
     return plan
+
+
+def _tol_integration(args, scene) -> tuple[str, float, int, float | None]:
+    """``run --tol``: (integrator, first step, a provisional step count, rho_inf).
+    generalized-alpha (the default with --tol) starts at --dt, or a tenth of its default fixed
+    step, and then chooses its steps; ab2 and cd take their step from the model after the build
+    (:func:`_tol_explicit`), so --dt is refused with them."""
+    from fxflex.formulation import implicit_step
+    from fxflex.time.driver import plan_integration
+
+    if not 0.0 < args.tol < 1.0:
+        raise FxflexError(f"--tol: got {args.tol:g}; allowed: 0 < EPS < 1 (a relative error)")
+    integrator = args.integrator or "generalized-alpha"
+    if integrator != "generalized-alpha" and args.dt is not None:
+        raise FxflexError(f"--dt: not with --tol and --integrator {integrator} (the step is the "
+                          "largest stable one with a margin, docs/tolerance.md); leave out --dt, "
+                          "or use generalized-alpha, where --dt is the first step")
+    plan = plan_integration(args.method, integrator, None, args.t_end, args.rho_inf,
+                            scene.rotation.rpm)
+    dt = plan.dt
+    if integrator == "generalized-alpha":
+        dt = args.dt if args.dt is not None else implicit_step(args.method,
+                                                               scene.rotation.rpm) / 10
+    return integrator, dt, max(int(round(args.t_end / dt)), 1), plan.rho_inf
+
+
+def _given_keys(args) -> set[str]:
+    """Dotted scene keys the user set (the --scene file's and --set's; --rpm and --damping
+    set no discretisation key)."""
+    import tomllib
+
+    from fxflex.scene.load import parse_override
+
+    tables = [parse_override(text) for text in args.overrides]
+    if args.scene:
+        with open(args.scene, "rb") as fh:          # load_scene has read and checked it
+            tables.append(tomllib.load(fh))
+    return {f"{sec}.{key}" for table in tables for sec, values in table.items()
+            if isinstance(values, dict) for key in values}
+
+
+def _tol_space(args, comm, scene, options):
+    """``run --tol``: (scene, form, refinement, failure, fixed keys): the discretisation as
+    ``steady --tol`` chooses it (and its form, built once), unless the scene sets one of the
+    method's discretisation keys (fxflex.analysis.tolerance.DISCRETISATION_KEYS), which is then
+    kept as it is."""
+    from dataclasses import replace
+
+    from fxflex.analysis.tolerance import Refiner, fixing_keys, steady_to_tolerance
+    from fxflex.formulation import build
+
+    fixed = fixing_keys(args.method, _given_keys(args))
+    if fixed:
+        if args.tol_levels is not None:
+            raise FxflexError(f"--tol-levels: the scene fixes the discretisation "
+                              f"({', '.join(fixed)}): nothing to refine")
+        return scene, build(args.method, scene, comm, options), None, None, fixed
+    refiner = Refiner(args.method, comm, replace(options, need_steady=True))
+    refined, failed = _refined(args, comm, lambda **kw: steady_to_tolerance(
+        args.method, scene, comm, args.tol, refiner=refiner, **kw), scene)
+    return refined["scene"], refined["best"]["form"], refined, failed, fixed
+
+
+def _tol_explicit(args, comm, plan: _RunPlan, form) -> str:
+    """``run --tol`` with ab2 or cd: the plan's step from the model's top frequency
+    (:func:`fxflex.time.adaptive.explicit_step`), shortened to end at --t-end; the rule."""
+    from fxflex.time.adaptive import explicit_step
+    from fxflex.time.driver import sample_steps, step_to_end
+    from fxflex.time.step_stability import top_mode
+
+    w, d = top_mode(form)
+    h, rule = explicit_step(plan.integrator, w, d, args.t_end, args.tol)
+    plan.dt, plan.nsteps = step_to_end(args.t_end, h)
+    plan.sample_every = (sample_steps(plan.dt, args.t_end, args.sample_dt)
+                         if (plan.out_path or args.fields) else plan.nsteps)
+    if plan.ckpt_path and not args.checkpoint_every and plan.resumed is None:
+        plan.ckpt_every = max(plan.nsteps // 20, 1)
+    plan.settings.update(dt_s=plan.dt, sample_every=plan.sample_every)
+    return rule
 
 
 def _check_run_paths(args, comm, plan: _RunPlan) -> None:
@@ -555,21 +660,25 @@ def _open_outputs(args, comm, scene, plan: _RunPlan, form, layout, implicit: dic
                                      "settings": settings, "layout": layout.kind,
                                      "ranks": comm.size, "dof": form.dof, "series": None,
                                      "checkpoint": {"path": os.path.abspath(plan.ckpt_path),
-                                                    "every": plan.ckpt_every}},
+                                                    "every": plan.ckpt_every,
+                                                    "every_s": plan.ckpt_dt}},
             series=writer,
             last=(os.path.abspath(args.resume), resumed["step"]) if resumed else None)
     return fields, writer, checkpoint
 
 
 def _simulate_with_outputs(args, comm, form, plan: _RunPlan, state, resume, fields, writer,
-                           checkpoint):
+                           checkpoint, scale: float | None = None):
     """The run itself, samples going to the series and every --fields-every-th to the fields.
     Both are closed when it ends; when it fails, an output failure leaves no half-written series
     and anything else keeps what was computed, flushed."""
     from fxflex.io import Progress
     from fxflex.time import simulate
 
-    progress = Progress(plan.nsteps, f"{args.method} {plan.integrator} dt={plan.dt:.3g}",
+    adaptive = plan.sample_dt is not None
+    progress = Progress(1000 if adaptive else plan.nsteps,
+                        f"{args.method} {plan.integrator} "
+                        + (f"--tol {plan.tol:g}" if adaptive else f"dt={plan.dt:.3g}"),
                         enabled=comm.rank == 0)
 
     count = [0]
@@ -582,12 +691,24 @@ def _simulate_with_outputs(args, comm, form, plan: _RunPlan, state, resume, fiel
         count[0] += 1
 
     try:
-        res = simulate(form, plan.integrator, plan.dt, args.t_end,
-                       sample_every=plan.sample_every,
-                       on_sample=on_sample if writer or fields else None, progress=progress,
-                       extras=writer is not None, rho_inf=plan.rho_inf, state=state,
-                       resume=resume, checkpoint_every=plan.ckpt_every or 0,
-                       on_checkpoint=checkpoint)
+        if adaptive:
+            from fxflex.time.adaptive import Clock, simulate_adaptive
+            clock = Clock.from_dict(plan.resumed["clock"]) if resume else None
+            res = simulate_adaptive(
+                form, plan.tol, args.t_end, h0=plan.dt, scale=scale or 0.0,
+                rho_inf=plan.rho_inf, sample_dt=plan.sample_dt,
+                on_sample=on_sample if writer or fields else None, progress=progress,
+                extras=writer is not None, state=state, clock=clock,
+                arrays=resume.arrays if resume else None,
+                checkpoint_every=plan.ckpt_every or 0, checkpoint_dt=plan.ckpt_dt,
+                on_checkpoint=checkpoint)
+        else:
+            res = simulate(form, plan.integrator, plan.dt, args.t_end,
+                           sample_every=plan.sample_every,
+                           on_sample=on_sample if writer or fields else None,
+                           progress=progress, extras=writer is not None, rho_inf=plan.rho_inf,
+                           state=state, resume=resume, checkpoint_every=plan.ckpt_every or 0,
+                           on_checkpoint=checkpoint)
     except BaseException as exc:
         # Collective clean-up only when every rank is here together.
         if writer is not None:
@@ -603,8 +724,49 @@ def _simulate_with_outputs(args, comm, form, plan: _RunPlan, state, resume, fiel
     return res
 
 
+def _tol_report(args, scene, plan: _RunPlan, res, tol: dict | None) -> tuple[dict, str]:
+    """SPEC 9 ``error_estimate`` and ``discretisation`` of ``run`` (both null without --tol)
+    and the text line. error_estimate: the time-integration estimate per tip component relative
+    to the peak |tip| of the history (adaptive generalized-alpha; null entries for ab2/cd, whose
+    step is bounded by stability, not estimated). discretisation: the mesh keys used, the spatial
+    estimate of steady --tol (``space_estimate``, relative to |tip| of the equilibrium) or the
+    keys that fixed it (``fixed_by``), and the step statistics (``time``)."""
+    from fxflex.analysis.tolerance import COMPONENTS, describe, json_fields, shown
+
+    if tol is None:
+        return {"error_estimate": None, "discretisation": None}, ""
+    refined = tol["refined"]
+    space = (json_fields(refined, "steady")["discretisation"] if refined is not None
+             else describe(scene, args.method))
+    space = dict(space, fixed_by=tol["fixed"] or None,
+                 space_estimate=None if refined is None else dict(zip(COMPONENTS,
+                                                                      refined["estimate"])))
+    ad = res.adaptive
+    if ad is not None:
+        error = dict(zip(COMPONENTS, ad["error_estimate"]))
+        time_info = {"integrator": plan.integrator, "rho_inf": plan.rho_inf, "eps": plan.tol,
+                     "steps": ad["accepted"], "rejected": ad["rejected"],
+                     "dt_first_s": plan.dt, "dt_min_s": ad["h_min"], "dt_max_s": ad["h_max"],
+                     "sample_dt_s": plan.sample_dt, "factorizations":
+                     res.stats.get("factorizations"),
+                     "estimate_kind": "Zienkiewicz-Xie local error per unit step, summed"}
+        line = (f"\n  --tol {plan.tol:g}: {ad['accepted']} steps, {ad['rejected']} rejected, dt "
+                f"{ad['h_min']:.3g}..{ad['h_max']:.3g} s; estimated time-integration error "
+                f"{max(ad['error_estimate']):.3g} of the peak")
+    else:
+        error = dict.fromkeys(COMPONENTS)
+        time_info = {"integrator": plan.integrator, "eps": plan.tol, "steps": res.steps,
+                     "rejected": 0, "dt_s": plan.dt, "rule": tol["rule"],
+                     "estimate_kind": "stability-bounded step, not estimated"}
+        line = f"\n  --tol {plan.tol:g}: {plan.integrator} at dt {plan.dt:.3g} s ({tol['rule']})"
+    line += (f"\n  discretisation: {shown(describe(scene, args.method))}"
+             + (f" (fixed by the scene: {', '.join(tol['fixed'])})" if tol["fixed"] else
+                f", estimated spatial error {max(refined['estimate']):.3g} (steady --tol)"))
+    return {"error_estimate": error, "discretisation": dict(space, time=time_info)}, line
+
+
 def _run_report(args, scene, form, plan: _RunPlan, res, resume, checkpoint, implicit: dict,
-                diverged, verdict, t_pre: float) -> tuple[dict, str]:
+                diverged, verdict, t_pre: float, tol: dict | None = None) -> tuple[dict, str]:
     """(payload, text) of ``run``: the JSON of SPEC section 8 and the human summary."""
     from fxflex.io import envelope, tip_mm
 
@@ -613,6 +775,7 @@ def _run_report(args, scene, form, plan: _RunPlan, res, resume, checkpoint, impl
     ckpt_info = None if checkpoint is None else {
         "path": checkpoint.path, "every": plan.ckpt_every, "written": checkpoint.written,
         "seconds": checkpoint.seconds}
+    tol_fields, tol_text = _tol_report(args, scene, plan, res, tol)
     payload = envelope(scene, method=args.method, rpm=scene.rotation.rpm, dof=form.dof,
                        integrator=integrator, dt_s=dt, **implicit, t_end_s=args.t_end, t_s=res.t,
                        steps=res.steps, tip_mm=tip_mm(res.tip), stable=verdict,
@@ -621,12 +784,14 @@ def _run_report(args, scene, form, plan: _RunPlan, res, resume, checkpoint, impl
                        resumed_from_step=resume.step if resume else None,
                        checkpoint=ckpt_info,
                        timings_s={"preprocess": t_pre, "solve": res.wall_s},
-                       detail_timings_s=form.timings)
-    text = (f"{args.method} {integrator} dt={dt:.3g} s, {res.steps} steps to t={res.t:.6g} s "
+                       detail_timings_s=form.timings, **tol_fields)
+    shown_dt = f"dt={dt:.3g} s" if res.adaptive is None else f"--tol {plan.tol:g}"
+    text = (f"{args.method} {integrator} {shown_dt}, {res.steps} steps to t={res.t:.6g} s "
             f"(dof {form.dof})\n  tip: {_fmt_tip(tip_mm(res.tip))}\n"
             f"  preprocess {t_pre:.2f} s, solve {res.wall_s:.2f} s"
             + (f" ({1e6 * res.wall_s / (res.steps - first):.1f} us/step)"
                if res.steps > first else ""))
+    text += tol_text
     if resume:
         text += f"\n  resumed from step {resume.step} of {args.resume}"
     if plan.rho_inf is not None:
@@ -664,7 +829,18 @@ def cmd_run(args, comm) -> None:
     plan = _plan_run(args, scene, comm)
     warnings, integrator, dt = plan.warnings, plan.integrator, plan.dt
     t0 = time.perf_counter()
-    form = build(args.method, scene, comm, options)
+    tol = failed = scale = None
+    if plan.tol is None:
+        form = build(args.method, scene, comm, options)
+    else:
+        scene, form, refined, failed, fixed = _tol_space(args, comm, scene, options)
+        tol = {"refined": refined, "fixed": fixed, "rule": None}
+        if integrator == "generalized-alpha":     # the scale of the step control
+            st = refined["best"]["steady"] if refined is not None else form.steady_state()
+            scale = math.sqrt(sum(float(x) ** 2 for x in st.tip)) if st.converged else 0.0
+        else:
+            tol["rule"] = _tol_explicit(args, comm, plan, form)
+            dt = plan.dt
     _warn(comm, warnings, *form.warnings)
     t_pre = time.perf_counter() - t0
     plan.settings.update(force_eval=form.force_eval, mass=form.mass_kind)
@@ -674,7 +850,9 @@ def cmd_run(args, comm) -> None:
     implicit = {"rho_inf": plan.rho_inf} if plan.rho_inf is not None else {}
     fields, writer, checkpoint = _open_outputs(args, comm, scene, plan, form, layout, implicit)
     res = _simulate_with_outputs(args, comm, form, plan, state, resume, fields, writer,
-                                 checkpoint)
+                                 checkpoint, scale)
+    if res.adaptive is not None:
+        dt = res.adaptive["h"]                  # the step the run would take next
     diverged = diagnose(form, integrator, dt, res) if res.diverged else None
     if diverged is None and integrator == "ab2" and not res.interrupted:
         _warn(comm, warnings, ab2_warning(form, dt, res.t))
@@ -683,10 +861,12 @@ def cmd_run(args, comm) -> None:
     verdict, why = (None, None) if res.interrupted else stability_verdict(form)
     _warn(comm, warnings, why)                  # of the equilibrium at the final speed
     payload, text = _run_report(args, scene, form, plan, res, resume, checkpoint, implicit,
-                                diverged, verdict, t_pre)
+                                diverged, verdict, t_pre, tol)
     _emit(comm, args, payload, text)
     if res.interrupted:
         raise SystemExit(EXIT_INTERRUPT)
+    if failed is not None:                      # --tol: the mesh cap ended above EPS
+        raise failed
 
 
 def _agreed(comm, fn, *args, **kwargs):

@@ -43,7 +43,8 @@ from fxflex.errors import FxflexError
 from fxflex.scene import Scene, scene_from_dict
 
 __all__ = ["COMPONENTS", "SOLID_LADDER", "MAX_DOF", "ToleranceNotMet", "ladder", "estimate",
-           "Refiner", "steady_to_tolerance", "modes_to_tolerance", "json_fields", "shown"]
+           "Refiner", "steady_to_tolerance", "modes_to_tolerance", "json_fields", "shown",
+           "DISCRETISATION_KEYS", "fixing_keys", "describe"]
 
 COMPONENTS = ("longitudinal", "orthogonal", "load")
 #: Q2 meshes (nx, ny, nz) of the solid methods, coarse to fine
@@ -59,6 +60,23 @@ MIN_ORDER, MAX_ORDER = 0.5, 8.0
 MODE_DOUBLINGS = 3
 SOLIDS = ("ffrf", "gcms", "tlf")
 MODAL = {"ffrf": "ffrf_modes", "gcms": "gcms_modes"}
+
+
+#: the scene keys that fix a method's spatial discretisation (``run --tol`` keeps a scene that
+#: sets one of them, instead of refining as ``steady --tol`` would)
+_SOLID_KEYS = ("mesh.solid", "mesh.solid_degree", "mesh.solid_file")
+DISCRETISATION_KEYS = {"lebb": ("mesh.beam_elements",),
+                       "nebb": ("mesh.beam_elements", "mesh.beam_variant"),
+                       "ancf": ("mesh.beam_elements", "mesh.beam_variant"),
+                       "tlf": _SOLID_KEYS,
+                       "ffrf": _SOLID_KEYS + ("reduction.ffrf_modes",),
+                       "gcms": _SOLID_KEYS + ("reduction.gcms_modes", "reduction.gcms_gram_tol")}
+
+
+def fixing_keys(method: str, given: set[str]) -> list[str]:
+    """The keys among ``given`` (dotted, those the user set) that fix the method's
+    discretisation (DISCRETISATION_KEYS)."""
+    return [k for k in DISCRETISATION_KEYS[method] if k in given]
 
 
 class ToleranceNotMet(FxflexError):
@@ -109,7 +127,7 @@ def estimate(h, values, scale) -> tuple[np.ndarray, list[str]]:
     return err, how
 
 
-def _describe(scene: Scene, method: str) -> dict:
+def describe(scene: Scene, method: str) -> dict:
     """The discretisation of a level (SPEC 9 ``discretisation`` keys)."""
     m = scene.mesh
     solid = method in SOLIDS
@@ -142,7 +160,7 @@ class Refiner:
             st = form.steady_state()
             if not st.converged:
                 raise FxflexError(f"--tol: the {self.method} equilibrium on "
-                                  f"{_describe(scene, self.method)} did not converge")
+                                  f"{describe(scene, self.method)} did not converge")
             values = [float(x) for x in st.tip]
             extra = {"steady": st}
         else:
@@ -150,7 +168,7 @@ class Refiner:
             modes = modes_of(form, self.pairs)
             values = [float(x) for x in modes.frequencies_hz]
             extra = {"modes": modes}
-        row = {"discretisation": _describe(scene, self.method), "dof": form.dof,
+        row = {"discretisation": describe(scene, self.method), "dof": form.dof,
                "result": values, "seconds": time.perf_counter() - t0,
                "build_s": t1 - t0, "form": form, **extra}
         self.done[key] = row

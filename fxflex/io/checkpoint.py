@@ -7,7 +7,8 @@ leaves either the old or the new checkpoint, never a torn one. It holds
 - ``meta``: JSON text - ``format``, ``fxflex_version``, the full ``scene`` and ``scene_hash``, the
   run ``settings`` that decide every number computed (method, integrator, dt_s, t_end_s,
   sample_every, force_eval, mass, rho_inf), the global ``step`` and time ``t_s`` reached, the
-  number of ``samples`` written, the CSV series (``path``, ``bytes`` written up to this step and
+  number of ``samples`` written, for a variable-step run (``--tol``) the controller's ``clock``
+  (time, next step, counters: fxflex.time.adaptive.Clock), the CSV series (``path``, ``bytes`` written up to this step and
   their ``sha256``; flushed and fsynced before the checkpoint is renamed into place), the
   checkpoint interval, the ``layout`` of the arrays and the rank count that wrote it;
 - ``q``, ``v``: the state at ``step``; ``scheme/NAME``: the integrator's history arrays
@@ -113,12 +114,19 @@ class CheckpointWriter:
         self.written = 0
         self.seconds = 0.0
         self.last = last            # (path, step) of the last good checkpoint of this run
+        self._clock = None
 
     def _time(self, step: int) -> float:
+        if self._clock is not None:
+            return self._clock["t"]
         return self.meta["settings"]["t0_s"] + step * self.meta["settings"]["dt_s"]
 
-    def __call__(self, step: int, q, v, arrays: dict, samples: int) -> None:
+    def __call__(self, step: int, q, v, arrays: dict, samples: int,
+                 clock: dict | None = None) -> None:
+        """``clock``: a variable-step run's controller state (fxflex.time.adaptive.Clock as a
+        dict: time, next step, counters), stored in meta; its time is the checkpoint's."""
         t0 = time.perf_counter()
+        self._clock = clock
         glob = {"q": self.layout.gather(q), "v": self.layout.gather(v)}
         for name, arr in arrays.items():
             glob[f"scheme/{name}"] = self.layout.gather(arr)
@@ -138,6 +146,8 @@ class CheckpointWriter:
         """Rank 0: write the checkpoint of ``step``; the error message if it failed."""
         meta = dict(self.meta, step=int(step), samples=int(samples), t_s=self._time(step),
                     written_at=time.strftime("%Y-%m-%d %H:%M:%S"))
+        if self._clock is not None:
+            meta["clock"] = self._clock
         try:
             if self.series is not None:
                 size, digest = self.series.sync()
@@ -267,4 +277,5 @@ def check_settings(meta: dict, scene: dict, scene_hash: str, settings: dict, pat
 _FLAGS = {"method": "--method", "integrator": "--integrator", "dt_s": "--dt (s)",
           "t_end_s": "--t-end (s)", "t0_s": "start time (s)",
           "sample_every": "a sample every (steps, from --sample-dt)",
-          "force_eval": "--force-eval", "mass": "--mass", "rho_inf": "--rho-inf"}
+          "force_eval": "--force-eval", "mass": "--mass", "rho_inf": "--rho-inf",
+          "tol": "--tol", "sample_dt_s": "--sample-dt (s)"}

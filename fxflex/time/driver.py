@@ -63,6 +63,7 @@ class RunResult:
     growth: np.ndarray | None = None  # (m, 2) rows (t, max |tip|) of the last checks, oldest first
     stats: dict = field(default_factory=dict)     # the scheme's counters (implicit: Newton)
     interrupted: bool = False        # stopped by SIGINT at step ``steps`` (one process only)
+    adaptive: dict | None = None     # step control (fxflex.time.adaptive): clock and estimate
 
 
 @dataclass

@@ -98,22 +98,31 @@ class GeneralizedAlpha:
     order = 2
 
     def __init__(self, rho_inf: float = DEFAULT_RHO_INF, *, tol: float = 1e-5, max_iter: int = 10,
-                 max_halvings: int = 4):
+                 max_halvings: int = 4, reuse_ratio: float = 1.0):
         self.rho_inf = rho_inf
         self.am, self.af, self.beta, self.gamma = parameters(rho_inf)
         self.tol, self.max_iter, self.max_halvings = tol, max_iter, max_halvings
+        #: a factor made for step h_f serves steps h with h / h_f in [1/ratio, ratio] (1: only
+        #: h_f itself). With a variable step (fxflex.time.adaptive) the stiff part of S scales
+        #: as h^2, so the modified Newton contracts by about |1 - (h / h_f)^2| on the stiff modes:
+        #: the contraction test and the renewal rule above decide whether the factor still pays.
+        self.reuse_ratio = reuse_ratio
         self.stats = {"steps": 0, "iterations": 0, "factorizations": 0, "retries": 0,
                       "halvings": 0}
 
     # -- set-up ---------------------------------------------------------------------------------
     def start(self, form, t: float, h: float, q: np.ndarray, v: np.ndarray) -> None:
-        """qdd_0 = a_0 = M^-1 F(t0, q0, v0) (the formulation's explicit acceleration), work
-        arrays, then the first step."""
+        """:meth:`begin`, then the first step."""
+        self.begin(form, t, q, v)
+        self.step(form, t, h, q, v)
+
+    def begin(self, form, t: float, q: np.ndarray, v: np.ndarray) -> None:
+        """qdd_0 = a_0 = M^-1 F(t0, q0, v0) (the formulation's explicit acceleration) and the work
+        arrays; no step (the adaptive driver, :mod:`fxflex.time.adaptive`, chooses it)."""
         self._setup(form, q.size)
         form.constrain(t, q, v)
         form.acceleration(t, q, v, self.qdd)
         self.a[:] = self.qdd
-        self.step(form, t, h, q, v)
 
     def resume(self, form, t: float, h: float, q: np.ndarray, v: np.ndarray,
                arrays: dict[str, np.ndarray]) -> None:
@@ -143,6 +152,7 @@ class GeneralizedAlpha:
         self._red, self._red_sum = np.zeros(3), np.zeros(3)
         self.factor = None
         self._h_factor = None
+        self._h_last = None
         self._renew = True
         self._eta, self._eta_age = 1.0, 0
         self._budget = math.inf        # iterations a factorisation is worth (measured)
@@ -190,7 +200,10 @@ class GeneralizedAlpha:
         np.multiply(abar, h * gamma, out=w)
         vb += w
         t1 = t + h
-        renew = self.factor is None or self._renew or self._h_factor != h
+        renew = self.factor is None or self._renew or not self._serves(h)
+        if not renew and h != self._h_factor and self._h_last != h:
+            self._eta_age = _ETA_AGE       # a factor of another step: measure its contraction
+        self._h_last = h
         for _ in range(2):
             if renew:
                 try:
@@ -209,6 +222,13 @@ class GeneralizedAlpha:
             renew = True
             self.stats["retries"] += 1
         return False
+
+    def _serves(self, h: float) -> bool:
+        """Whether the factor made for ``_h_factor`` may be used for a step h (reuse_ratio)."""
+        hf = self._h_factor
+        if hf == h:
+            return True
+        return hf is not None and 1.0 / self.reuse_ratio <= h / hf <= self.reuse_ratio
 
     def _factorize(self, form, t1: float, cq: float, cv: float, h: float) -> None:
         """S = M + cv C_t + cq K_t at the predictor state (x = qdd_n)."""
