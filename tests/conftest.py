@@ -8,6 +8,11 @@ import pytest
 for _name in ("ffcx", "UFL", "ufl", "dolfinx"):
     logging.getLogger(_name).setLevel(logging.WARNING)
 
+# PetscInitialize is collective on MPI_COMM_WORLD: done here, on every rank at once, it cannot
+# fall inside a test's rank-0-only work (writing a mesh file) while the other rank waits in a
+# barrier, which deadlocked tests/mesh/test_imported.py when it ran first under mpirun -n 2
+from petsc4py import PETSc  # noqa: E402,F401
+
 
 def pytest_collection_modifyitems(config, items):
     from mpi4py import MPI

@@ -21,6 +21,7 @@ Serial; prints a Markdown table.
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -38,8 +39,12 @@ def hex_scene(folder: Path, k: int, rpm: float) -> Scene:
     g = Scene().geometry
     contour = Path(folder) / "rectangle.csv"
     y, z = g.root_y / 2, g.root_z / 2
-    contour.write_text("y,z\n" + "".join(f"{a},{b}\n" for a, b in
-                                         ((-y, -z), (y, -z), (y, z), (-y, z))))
+    # every rank of a parallel run writes the same file: in one step (a temporary, then
+    # os.replace), so that no rank reads another's half-written (truncated) copy
+    tmp = contour.with_name(f"{contour.name}.{os.getpid()}.tmp")
+    tmp.write_text("y,z\n" + "".join(f"{a},{b}\n" for a, b in
+                                     ((-y, -z), (y, -z), (y, z), (-y, z))))
+    os.replace(tmp, contour)
     return Scene().replace(**{"geometry.section": "polygon", "geometry.contour": str(contour),
                               "mesh.solid": (8 * k, 2 * k, 2 * k), "mesh.solid_degree": 2,
                               "rotation.rpm": rpm})

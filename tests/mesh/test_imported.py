@@ -22,8 +22,10 @@ def _polygon_scene(tmp, degree, divisions):
     g = Scene().geometry
     contour = tmp / "rect.csv"
     y, z = g.root_y / 2, g.root_z / 2
-    contour.write_text("y,z\n" + "".join(f"{a},{b}\n" for a, b in
-                                         ((-y, -z), (y, -z), (y, z), (-y, z))))
+    if COMM.rank == 0:              # one writer: the folder is shared by the ranks
+        contour.write_text("y,z\n" + "".join(f"{a},{b}\n" for a, b in
+                                             ((-y, -z), (y, -z), (y, z), (-y, z))))
+    COMM.barrier()
     return Scene().replace(**{"geometry.section": "polygon", "geometry.contour": str(contour),
                               "geometry.hub_radius": HUB, "mesh.solid": divisions,
                               "mesh.solid_degree": degree, "rotation.rpm": 5000.0})

@@ -26,11 +26,6 @@ from fxflex.solid.model import SolidModel
 from fxflex.time import simulate
 from fxflex.time.step_stability import critical_step
 
-#: serial: under mpirun -n 2 the first test failed on rank 1 and errored on rank 0 on a fresh
-#: cache in CI, leaving a rank in a collective (not yet diagnosed; the imported-mesh path itself
-#: is covered under MPI by tests/mesh/test_imported.py)
-pytestmark = pytest.mark.serial
-
 COMM = MPI.COMM_WORLD
 SIZE = 0.05             # 3543 unknowns as P2, 0.2 s per steady state
 RPM = 1000.0
