@@ -119,9 +119,10 @@ def test_failed_warm_start_falls_back_to_the_cold_solve(cached, distributed_rtol
 def test_elastodyn_export_of_tlf_on_the_default_mesh(tmp_path):
     """``fxflex modes --method tlf --elastodyn`` on the default scene (100 x 12 x 6 Q1, the
     twisted tapered blade at 1000 rpm): every shape's coefficients sum to 1 to the KKT solve's
-    round-off (tests/analysis/test_elastodyn.py), the file carries them, and flap 1 -- a smooth
-    bending mode -- is fitted by the x^2..x^6 polynomial to a residual below 1e-3 of its tip
-    value (measured 2026-12-03: docs/stability.md)."""
+    round-off (tests/analysis/test_elastodyn.py), the file is written, and flap 1 is fitted by
+    the x^2..x^6 polynomial to within 10 x the bound the closed-form cantilever's first mode
+    meets (1e-5, tests/analysis/test_elastodyn.py): taper and twist keep it a smooth bending
+    shape (measured 1.9e-5, docs/stability.md). Serial: it checks the command's output."""
     path = tmp_path / "blade.dat"
     r = subprocess.run([sys.executable, "-m", "fxflex", "modes", "--method", "tlf",
                         "--elastodyn", str(path), "--json"], capture_output=True, text=True)
@@ -134,4 +135,4 @@ def test_elastodyn_export_of_tlf_on_the_default_mesh(tmp_path):
         assert abs(np.sum(c) - 1.0) <= 1e-12 * np.sum(np.abs(c))
     flap1 = shapes["BldFl1Sh"]
     assert d["labels"][flap1["mode"] - 1] == "out-of-plane"
-    assert flap1["residual"] < 1e-3
+    assert flap1["residual"] < 1e-4
