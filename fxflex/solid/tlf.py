@@ -28,7 +28,8 @@ Steady state (SPEC section 6): :mod:`fxflex.solid.tlf_steady`. The pieces the cl
 beside it: the UFL force kernel (:mod:`.tlf_force`), the time-loop data and buffers
 (:mod:`.tlf_dynamics`), the implicit iteration matrix (:mod:`.tlf_tangent`) and the highest
 frequency behind the stable step (:mod:`.tlf_frequency`); the XDMF output is
-:class:`fxflex.io.fields.FieldWriter`.
+:class:`fxflex.io.fields.FieldWriter`. A sweep over speeds (the Campbell diagram) is
+:mod:`.tlf_sweep`.
 """
 
 from __future__ import annotations
