@@ -49,17 +49,28 @@ def _distributed_rtol(form, steady) -> float:
         return 0.0
     lin = form.linearise(steady)
     try:
-        K = lin.K
-        indptr, indices, data = K.getValuesCSR()
-        first, last = K.getOwnershipRange()
-        n = K.getSize()[0]
-        local = np.zeros((last - first, n))
-        for i in range(last - first):
-            local[i, indices[indptr[i]:indptr[i + 1]]] = data[indptr[i]:indptr[i + 1]]
-        dense = np.vstack(form.comm.allgather(local))
+        dense = _gathered_dense(lin.K, form.comm)
     finally:
         lin.destroy()
     return 10.0 * np.linalg.cond(dense) * EPS
+
+
+def _gathered_dense(K, comm) -> np.ndarray:
+    """A distributed PETSc matrix as the whole dense array on every rank (small meshes only).
+    Collective."""
+    indptr, indices, data = K.getValuesCSR()
+    first, last = K.getOwnershipRange()
+    n = K.getSize()[0]
+    local = np.zeros((last - first, n))
+    for i in range(last - first):
+        local[i, indices[indptr[i]:indptr[i + 1]]] = data[indptr[i]:indptr[i + 1]]
+    return np.vstack(comm.allgather(local))
+
+
+@pytest.fixture
+def gathered_dense():
+    """:func:`_gathered_dense`: a distributed PETSc matrix, dense on every rank."""
+    return _gathered_dense
 
 
 @pytest.fixture

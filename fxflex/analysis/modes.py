@@ -143,10 +143,15 @@ def modes_of(form, pairs: int) -> Modes:
 def speed_builder(method: str, scene: Scene, comm, options=None):
     """``build_at(rpm)``: the formulation of ``scene`` at another speed, the first build's
     ``at(rpm=...)`` (FFRF and GCMS share its mesh, operators, modes and projections, which do
-    not depend on the speed; the others are built afresh: beams in milliseconds, TLF's mesh
-    from the cache)."""
+    not depend on the speed; the beams are built afresh, in milliseconds). TLF's come from a
+    :class:`~fxflex.solid.tlf_sweep.SpeedSweep`: one SolidModel, each steady state continued
+    from the equilibria already found and each PEP started from the nearest speed's modes, the
+    results those of a cold build to the solvers' tolerances."""
     from fxflex.formulation import build
 
+    if method == "tlf":
+        from fxflex.solid.tlf_sweep import SpeedSweep
+        return SpeedSweep(scene, comm, options).at
     first = []
 
     def build_at(rpm: float):

@@ -36,15 +36,22 @@ def make_direct(ksp: PETSc.KSP, *, symmetric: bool = True) -> PETSc.KSP:
 
 
 def pep_eigen(M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, pairs: int, *, target: float = 0.0,
-              tol: float | None = None, vectors: bool = True
-              ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+              tol: float | None = None, vectors: bool = True, symmetric: bool = False,
+              initial: np.ndarray | None = None, errors: bool = True
+              ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """The ``pairs`` roots nearest ``target`` with Im >= 0 (one per conjugate pair), as
     (lambda (k,), X (n_local, k) complex or None, backward errors (k,)), unsorted.
 
     SLEPc returns a complex pair as two consecutive roots; ``nev`` asks for both members of each
     pair plus a margin, so that at least ``pairs`` roots with Im >= 0 converge, and never more
     than the 2n roots there are (n the size of the matrices). Fewer converged roots raise
-    :class:`~fxflex.numerics.qep.EigenNotConverged` carrying those that did."""
+    :class:`~fxflex.numerics.qep.EigenNotConverged` carrying those that did.
+
+    ``symmetric``: P(target) is symmetric (no circulatory term; at target 0 it is K), so MUMPS
+    factorises it as LDL^T, half the entries of LU. ``initial`` (n_local, m) real: the Krylov
+    search starts from these vectors (SLEPc's initial space), e.g. the mode vectors of a nearby
+    speed; the roots it converges are the same, to ``tol``. Without ``errors`` the backward
+    errors are not computed (None)."""
     pep = SLEPc.PEP().create(K.getComm())
     pep.setOperators([K, C, M])
     pep.setProblemType(SLEPc.PEP.ProblemType.GENERAL)
@@ -57,18 +64,29 @@ def pep_eigen(M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, pairs: int, *, target: f
     pep.setWhichEigenpairs(SLEPc.PEP.Which.TARGET_MAGNITUDE)
     st = pep.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
-    make_direct(st.getKSP(), symmetric=False)
+    make_direct(st.getKSP(), symmetric=symmetric)
     pep.setTolerances(TOL if tol is None else tol, MAX_IT)
+    space = []
+    if initial is not None and initial.shape[1]:
+        for col in initial.T:
+            v = K.createVecRight()
+            v.setArray(np.ascontiguousarray(col))
+            space.append(v)
+        pep.setInitialSpace(space)
     pep.solve()
+    for v in space:
+        v.destroy()
     nconv = pep.getConverged()
     xr, xi = K.createVecRight(), K.createVecRight()
-    lam, cols, errors = [], [], []
+    lam, cols = [], []
+    backward = [] if errors else None
     for i in range(nconv):
         value = pep.getEigenpair(i, xr, xi)
         if value.imag < 0.0:
             continue
         lam.append(complex(value))
-        errors.append(pep.computeError(i, SLEPc.PEP.ErrorType.BACKWARD))
+        if backward is not None:
+            backward.append(pep.computeError(i, SLEPc.PEP.ErrorType.BACKWARD))
         if vectors:
             cols.append(xr.getArray(readonly=True) + 1j * xi.getArray(readonly=True))
     pep.destroy()
@@ -78,7 +96,7 @@ def pep_eigen(M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, pairs: int, *, target: f
     if len(lam) < pairs:
         raise EigenNotConverged(f"SLEPc PEP converged {len(lam)} of {pairs} eigenvalue pairs",
                                 np.array(lam, dtype=complex), X)
-    return np.array(lam), X, np.array(errors)
+    return np.array(lam), X, None if backward is None else np.array(backward)
 
 
 class PetscLinearisation:
@@ -92,18 +110,21 @@ class PetscLinearisation:
 
     With ``reassemble`` (a callable giving (M, C, K) afresh) the matrices are freed after each
     eigensolve, as a distributed model's memory asks, and assembled again only for a later solve
-    that wants more roots."""
+    that wants more roots. ``symmetric`` and ``initial`` are passed to :func:`pep_eigen`
+    (a symmetric K; a starting space, e.g. a nearby speed's modes)."""
 
     kind = "petsc"
 
     def __init__(self, M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, *, min_pairs: int = 8,
-                 rtol: float = 1e-8, reassemble=None):
+                 rtol: float = 1e-8, reassemble=None, symmetric: bool = False,
+                 initial: np.ndarray | None = None):
         self.M, self.C, self.K = M, C, K
         self._reassemble = reassemble
         self.dof = K.getSize()[0]
         self.min_pairs = min_pairs      # lowest pairs behind eigenvalues(), stable(), growth_rate()
         self.rtol = rtol                # a root grows when Re > rtol max|lambda| (PEP residual)
         self.note: str | None = None
+        self.symmetric, self.initial = symmetric, initial
         self._modes: tuple[np.ndarray, np.ndarray | None, int] | None = None
 
     def modes(self, pairs: int) -> tuple[np.ndarray, np.ndarray]:
@@ -119,7 +140,8 @@ class PetscLinearisation:
             if self.K is None:
                 self.M, self.C, self.K = self._reassemble()
             try:
-                lam, X, _ = pep_eigen(self.M, self.C, self.K, count)
+                lam, X, _ = pep_eigen(self.M, self.C, self.K, count, symmetric=self.symmetric,
+                                      initial=self.initial, errors=False)
             except EigenNotConverged as exc:
                 lam, X = exc.eigenvalues, exc.vectors
             finally:

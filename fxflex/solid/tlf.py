@@ -28,7 +28,8 @@ Steady state (SPEC section 6): :mod:`fxflex.solid.tlf_steady`. The pieces the cl
 beside it: the UFL force kernel (:mod:`.tlf_force`), the time-loop data and buffers
 (:mod:`.tlf_dynamics`), the implicit iteration matrix (:mod:`.tlf_tangent`) and the highest
 frequency behind the stable step (:mod:`.tlf_frequency`); the XDMF output is
-:class:`fxflex.io.fields.FieldWriter`.
+:class:`fxflex.io.fields.FieldWriter`. A sweep over speeds (the Campbell diagram) is
+:mod:`.tlf_sweep`.
 """
 
 from __future__ import annotations
@@ -56,6 +57,7 @@ from fxflex.solid.tlf_tangent import HubTangent
 
 if TYPE_CHECKING:
     from fxflex.solid.rotating import Linearisation
+    from fxflex.solid.tlf_sweep import SpeedSweep
 
 __all__ = ["TLF", "UflForce", "FieldWriter", "build", "dof_count", "tlf_steady", "largest_frequency",
            "DEFAULT_MASS"]
@@ -82,6 +84,8 @@ class TLF(FormulationBase):
 
     The transient operators are built on the first call of ``initial_state`` (eagerly when the
     options say no steady state is needed, as ``fxflex run`` does), never inside the time loop.
+    A member of a speed sweep (``model`` and ``sweep`` given, :mod:`fxflex.solid.tlf_sweep`)
+    shares the sweep's SolidModel and continues its steady states and eigensolves.
     """
 
     method = "tlf"
@@ -93,10 +97,12 @@ class TLF(FormulationBase):
     #: (fxflex.time.driver.divergence_limit)
     deflection_range = 2.0
 
-    def __init__(self, scene: Scene, comm, options: BuildOptions, *, hub_frame: bool = True):
+    def __init__(self, scene: Scene, comm, options: BuildOptions, *, hub_frame: bool = True,
+                 model: SolidModel | None = None, sweep: SpeedSweep | None = None):
         t0 = time.perf_counter()
         self.scene, self.options = scene, options
-        self.model = SolidModel(scene, comm)
+        self.model = SolidModel(scene, comm) if model is None else model
+        self.sweep = sweep
         self.comm = comm
         self.dof = self.model.dof
         self.force_eval = options.force_eval or FORCE_EVAL["tlf"][0]
@@ -123,7 +129,8 @@ class TLF(FormulationBase):
     # -- Formulation interface --------------------------------------------------------------------
     def steady_state(self) -> SteadyState:
         if self._steady is None:
-            self._steady = tlf_steady(self.model)
+            self._steady = (tlf_steady(self.model) if self.sweep is None
+                            else self.sweep.steady(self))
         return self._steady
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -297,10 +304,21 @@ class TLF(FormulationBase):
 
         st = steady or self.steady_state()
         sc = self.scene
+        absolute = sc.damping.model == "absolute"
+        start = {} if self.sweep is None else self.sweep.eigen_start(self, absolute)
         return tlf_linearisation(self.model, st.q, sc.rotation.omega,
-                                 sc.damping.c / sc.material.rho, sc.damping.model == "absolute",
+                                 sc.damping.c / sc.material.rho, absolute,
                                  self.mass_kind, min_pairs=STABILITY_PAIRS,
-                                 rtol=PEP_STABILITY_RTOL)
+                                 rtol=PEP_STABILITY_RTOL, **start)
+
+    def rotating_modes(self, pairs: int, steady: SteadyState | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """As every formulation's; a sweep member also hands its mode vectors to the sweep (the
+        next speed's initial space)."""
+        lam, X = super().rotating_modes(pairs, steady)
+        if self.sweep is not None:
+            self.sweep.record_modes(self, X)
+        return lam, X
 
     def top_frequency(self) -> float:
         """``omega_max()``: the clamped body at rest, one SLEPc solve, rather than a steady state

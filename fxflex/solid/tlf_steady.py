@@ -12,6 +12,14 @@ where the unstressed K_L - Omega^2 M_P loses definiteness the first Newton step 
 unstable linear mode, so the speed is raised in stages (continuation in Omega^2), each stage
 starting from the previous equilibrium. A [tip_mass] adds its centrifugal load on its deformed
 position (and circulatory term) through :class:`fxflex.solid.tip_mass.SteadyTerms`.
+
+A sweep over speeds (the Campbell diagram, :mod:`fxflex.solid.tlf_sweep`) passes ``start``: an
+equilibrium already known at a nearby speed (or a prediction of the one sought). Newton then
+starts from it, the stages raising Omega^2 from that speed's in steps no larger than the cold
+path's, and converges to the same absolute residual as a cold single-stage solve: rtol times the
+residual of the undeformed body at this speed (the load the cold solve measures itself against).
+Both end at the one equilibrium of the stable branch, so the two differ by the Newton tolerance,
+not by which start was taken (tests/analysis/test_campbell_speed.py).
 """
 
 from __future__ import annotations
@@ -19,6 +27,7 @@ from __future__ import annotations
 import math
 import time
 
+import numpy as np
 import ufl
 from dolfinx import fem
 
@@ -28,16 +37,18 @@ from fxflex.solid.model import SolidModel
 from fxflex.solid.solvers import newton
 from fxflex.solid.tip_mass import SteadyTerms, tip_body
 
-__all__ = ["tlf_steady"]
+__all__ = ["tlf_steady", "STAGE_OMEGA"]
 
 #: highest speed reached in one Newton solve from the undeformed state (rad/s); above it the
 #: continuation raises Omega^2 in equal stages (1000 rpm default scene needs 1, 10000 rpm needs 3)
-_STAGE_OMEGA = 2 * math.pi * 6000 / 60
+STAGE_OMEGA = 2 * math.pi * 6000 / 60
 
 
 def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1e-10,
-               max_it: int = 30) -> SteadyState:
-    """Rotating-frame TLF equilibrium at speed omega (rad/s; default the scene's)."""
+               max_it: int = 30, start: tuple[float, np.ndarray] | None = None) -> SteadyState:
+    """Rotating-frame TLF equilibrium at speed omega (rad/s; default the scene's). ``start`` =
+    (omega0, U0): continue from the owned displacement U0, the equilibrium at omega0 or a
+    prediction of it at omega (then omega0 = omega), as the module docstring says."""
     omega = model.scene.rotation.omega if omega is None else omega
     t0 = time.perf_counter()
     U = fem.Function(model.V)
@@ -55,16 +66,30 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
     extra = None if body is None else SteadyTerms(body, w2, w1 if absolute else None,
                                                   damping.c / model.rho)
     F_ext = model.rotating_load()
+    reference, w2_start = None, 0.0
+    if start is not None:
+        # the cold single stage's reference: the residual of the undeformed body at omega
+        w2.value = omega**2
+        if absolute:
+            w1.value = omega
+        reference = newton(R, J, U, [model.bc], rhs=F_ext, max_it=0, symmetric=not absolute,
+                           extra=extra).residuals[0]
+        w2_start = start[0] ** 2
+        U.x.array[: model.n_owned] = start[1]
+        U.x.scatter_forward()
     t_setup = time.perf_counter() - t0
-    stages = max(1, math.ceil((omega / _STAGE_OMEGA) ** 2))
+    if start is None:
+        stages = max(1, math.ceil((omega / STAGE_OMEGA) ** 2))
+    else:
+        stages = max(1, math.ceil(abs(omega**2 - w2_start) / STAGE_OMEGA**2))
     residuals, iterations, converged = [], 0, True
     timings = {"setup": t_setup, "assemble": 0.0, "factor_solve": 0.0}
     for k in range(1, stages + 1):
-        w2.value = omega**2 * k / stages
+        w2.value = w2_start + (omega**2 - w2_start) * k / stages
         if absolute:
             w1.value = math.sqrt(w2.value)
         res = newton(R, J, U, [model.bc], rhs=F_ext, rtol=rtol, max_it=max_it,
-                     symmetric=not absolute, extra=extra)
+                     reference=reference, symmetric=not absolute, extra=extra)
         residuals = res.residuals
         iterations += res.iterations
         for key in ("assemble", "factor_solve"):
