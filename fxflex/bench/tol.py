@@ -13,9 +13,10 @@ References (the method's own continuum, as the estimate is):
   :func:`fxflex.analysis.reference.stored_reference`), linear for FFRF and GCMS, nonlinear for
   TLF (Q2 to 430848 unknowns with Richardson; its own error is recorded per row);
 - steady, beams, and every method's frequencies: no stored one, so our own refinement
-  (:func:`own_reference`): the method's ``--tol`` ladder run further than any ``--tol`` row
-  went (steady beams: the whole ladder, 256-640 elements; frequencies: one mesh level beyond the
-  finest level a ``modes --tol`` row reached, FFRF / GCMS with twice the most modes a row used),
+  (:func:`own_reference`): the method's ``--tol`` ladder run :data:`REF_EXTRA_LEVELS` mesh
+  levels beyond the finest a ``--tol`` row of its kind reached (three for LEBB and NEBB; ANCF,
+  dense, two for steady and one for modes; the solids' frequencies one, to 187200 unknowns;
+  FFRF / GCMS frequencies with twice the most modes a row used),
   then Richardson on its three finest mesh levels per quantity
   (:func:`fxflex.analysis.reference.richardson`), the finest level where the differences are
   not monotone. Its own uncertainty is |reference - Richardson of the three levels before|
@@ -73,10 +74,12 @@ RATIO_BOUND, COST_BOUND, TLF_SECONDS = 3.0, 3.0, 10.0
 STORED_THEORY = {"ffrf": "linear", "gcms": "linear", "tlf": "tlf"}
 #: EPS of the reference runs (below any level's estimate: the ladder runs to its cap)
 REF_EPS = 1e-12
-#: mesh levels a frequency reference goes beyond the finest ``modes --tol`` row: three (its
-#: Richardson triple then lies above every row) where cheap; one for ANCF (its modes cost about
-#: 5x per doubling: 3.5 s at 20 elements, ~25 s at 40) and the solids (the unknowns' cap)
-REF_EXTRA_LEVELS = {"lebb": 3, "nebb": 3}
+#: mesh levels a reference of our own goes beyond the finest ``--tol`` row of its kind: three
+#: (its Richardson triple then lies above every row) where cheap; ANCF is dense (320 elements
+#: need 17 GB; its modes cost about 5x per doubling, 3.5 s at 20 elements, ~25 s at 40): two
+#: (steady) and one (modes); the solids' modes one (the unknowns' cap)
+REF_EXTRA_LEVELS = {"steady": {"lebb": 3, "nebb": 3, "ancf": 2},
+                    "modes": {"lebb": 3, "nebb": 3, "ancf": 1}}
 #: unknowns allowed to the frequency references (TLF / FFRF / GCMS Q2 96x12x6: 187200)
 REF_MAX_DOF = 200_000
 #: discretisations of the accuracy tables: solid meshes (degree, divisions) and beam
@@ -334,17 +337,21 @@ def _tol_rows(store: _Store, method: str, scene: Scene, comm, epsilons, what: st
     return rows
 
 
-def _ladder_reference(method: str, scene: Scene, comm, what: str,
-                      mesh_levels: int | None = None) -> dict:
-    """The method's own reference (module docstring): its ladder at :data:`REF_EPS` (steady: the
-    whole ladder; modes: ``mesh_levels`` levels, at least 3, to :data:`REF_MAX_DOF` unknowns),
-    then :func:`own_reference`."""
+def _reference_levels(method: str, rows: list[dict], what: str) -> int:
+    """Mesh levels of a reference: :data:`REF_EXTRA_LEVELS` beyond the finest row, at least 3."""
+    finest = max(len(_mesh_levels(r["levels"])) for r in rows)
+    return max(finest + REF_EXTRA_LEVELS[what].get(method, 1), 3)
+
+
+def _ladder_reference(method: str, scene: Scene, comm, what: str, mesh_levels: int) -> dict:
+    """The method's own reference (module docstring): ``mesh_levels`` levels of its ladder at
+    :data:`REF_EPS` (modes: to :data:`REF_MAX_DOF` unknowns), then :func:`own_reference`."""
     try:
         if what == "steady":
-            out = steady_to_tolerance(method, scene, comm, REF_EPS)
+            out = steady_to_tolerance(method, scene, comm, REF_EPS, max_levels=mesh_levels)
         else:
             out = modes_to_tolerance(method, scene, comm, REF_EPS, PAIRS,
-                                     max_levels=max(mesh_levels or 3, 3), max_dof=REF_MAX_DOF)
+                                     max_levels=mesh_levels, max_dof=REF_MAX_DOF)
     except ToleranceNotMet as exc:
         out = exc.result
     ref = own_reference(out["levels"], "tip_m" if what == "steady" else "frequencies_hz")
@@ -381,8 +388,9 @@ def run(scene: Scene, out_dir: str, comm, quick: bool = False) -> dict:
                        "source": f"stored {STORED_THEORY[method]} reference "
                                  f"(fxflex/data/reference.json)", "levels": None}
             else:
+                n_mesh = _reference_levels(method, rows, "steady")
                 ref = _cached(store, f"reference steady {method} {rpm:g}",
-                              lambda: _ladder_reference(method, sc, comm, "steady"), log)
+                              lambda: _ladder_reference(method, sc, comm, "steady", n_mesh), log)
             cands = _cached(store, f"candidates {method} {rpm:g}",
                             lambda: candidates(method, sc, comm, ref["value"], eps_min, log,
                                                cand_dof), log)
@@ -400,8 +408,7 @@ def run(scene: Scene, out_dir: str, comm, quick: bool = False) -> dict:
             if method in ("ffrf", "gcms"):
                 most = max(r["discretisation"]["modes"] for r in rows)
                 base = scene_from_dict({"reduction": {f"{method}_modes": 2 * most}}, base=sc)
-            n_mesh = (max(len(_mesh_levels(r["levels"])) for r in rows)
-                      + REF_EXTRA_LEVELS.get(method, 1))
+            n_mesh = _reference_levels(method, rows, "modes")
             ref = _cached(store, f"reference modes {method} {rpm:g}",
                           lambda: _ladder_reference(method, base, comm, "modes", n_mesh), log)
             for r in rows:
