@@ -40,7 +40,7 @@ def quick(tmp_path_factory):
 
 
 def test_six_methods_against_their_references(quick):
-    res, out = quick
+    res, _ = quick
     refs = res["results"]["references"]
     assert sorted(refs) == sorted(f"{m}@{rpm:g}" for m in METHODS for rpm in airfoil.SPEEDS)
     for key, ref in refs.items():
@@ -59,6 +59,12 @@ def test_six_methods_against_their_references(quick):
         gap = next(g for g in res["results"]["gaps"] if (g["rpm"], g["method"], g["against"])
                    == (rpm, "gcms", "ffrf"))
         assert gap["norm_pct"] < 100 * refs[f"ffrf@{rpm:g}"]["errors"][-1]
+
+
+@pytest.mark.serial
+def test_files_written(quick):
+    """airfoil.json (rank 0 writes it into its own folder) holds every row, and the report."""
+    _, out = quick
     data = json.loads((out / "airfoil.json").read_text())
     assert len(data["rows"]) == len(METHODS) * len(airfoil.SPEEDS) * 3
     assert "Diagnosis" in (out / "airfoil.md").read_text()
