@@ -40,7 +40,7 @@ EXIT_INPUT, EXIT_FAILURE, EXIT_INTERRUPT = 2, 1, 130
 
 
 BENCHES = ("steady", "tlf", "reduced", "beams", "paper", "accuracy", "stability", "skip",
-           "implicit", "convergence", "tol")
+           "implicit", "convergence", "tol", "airfoil")
 
 
 class _Parser(argparse.ArgumentParser):

@@ -55,7 +55,7 @@ import numpy as np
 from fxflex.analysis import compare_figures as figures
 from fxflex.analysis.compare_cache import FormCache
 from fxflex.analysis.compare_output import transient_row, write_csv, write_results
-from fxflex.analysis.compare_paper import paper_rows
+from fxflex.analysis.compare_paper import not_applicable, paper_rows, paper_scene_differences
 from fxflex.analysis.compare_plan import (ACCURATE_SOLIDS, C3, DAMPING_RPM, GROWTH_LIMIT,
                                           PAPER_WINDOW, SAMPLE_DT, TLF_WINDOWS, SteadyRow, plan,
                                           steady_time)
@@ -82,6 +82,9 @@ class Compare:
                  say=None, paper_window: float = PAPER_WINDOW, tlf_windows: dict | None = None,
                  accurate: dict | None = None):
         self.base = scene.replace(**{"rotation.profile": "constant"})
+        #: what makes the scene another body than the paper's (issue 14): then every study runs
+        #: as on the paper's scene and the paper's figures are marked not applicable
+        self.differences = paper_scene_differences(self.base)
         self.paper_window, self.tlf_windows = paper_window, tlf_windows or TLF_WINDOWS
         self.methods = [m for m in METHODS if m in methods]
         self.out_dir, self.comm, self.full = out_dir, comm, full
@@ -221,7 +224,7 @@ class Compare:
                 continue                    # a row without a solid in it
             out.append({**f, "q1_ours": base["ours"], "q1_pass": base["pass"],
                         "locking": bool(base["pass"] is False and f["pass"] is True)})
-        return out
+        return not_applicable(out) if self.differences else out
 
     def _log_steady(self, row: SteadyRow) -> None:
         t = 1e3 * row.tip_m
@@ -392,7 +395,10 @@ class Compare:
 
     def result(self) -> dict:
         figures = paper_rows(self.steady, self.damping, self.summaries, self.efficiency)
+        if self.differences:
+            figures = not_applicable(figures)
         return {"methods": self.methods, "full": self.full,
+                "paper_scene": not self.differences, "scene_differences": self.differences,
                 "windows": {"paper_s": self.paper_window,
                             "tlf_s": None if self.full else self.tlf_windows,
                             "sample_dt_s": SAMPLE_DT},

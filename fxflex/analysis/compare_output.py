@@ -8,7 +8,7 @@ import json
 import math
 import os
 
-from fxflex.analysis.compare_report import HOW
+from fxflex.analysis.compare_report import how
 from fxflex.io.payload import COMPONENTS, jsonable
 
 __all__ = ["write_csv", "write_results", "cell", "transient_row"]
@@ -33,7 +33,7 @@ def write_results(out_dir: str, result: dict, report: str) -> None:
         json.dump(jsonable(result), fh, indent=1)
     if result["paper"]:
         write_csv(os.path.join(out_dir, "paper.csv"),
-                  [{**f, "how": HOW[f["kind"]]} for f in result["paper"]])
+                  [{**f, "how": how(f)} for f in result["paper"]])
     with open(os.path.join(out_dir, "report.md"), "w") as fh:
         fh.write(report)
 

@@ -1,8 +1,18 @@
 """The SPEC section 7 rows of ``fxflex compare``: each figure of the paper's Sect. 4 next to ours,
-with the way it is compared (``fxflex.analysis.compare_report.HOW``) and pass/FAIL."""
+with the way it is compared (``fxflex.analysis.compare_report.HOW``) and pass/FAIL.
+
+The paper's figures are about its own body (SPEC section 1: the tapered, twisted steel rectangle,
+the line load, no tip mass). On any other body (issue 14: another section, a stations table, an
+imported mesh, other sizes, material or load) the same rows are built from our equilibria and
+runs, so the six methods stand side by side as on the paper's scene, but the paper's figure is
+replaced by :data:`NOT_APPLICABLE` and the row gets no verdict (:func:`not_applicable`). Meshes,
+element degrees, beam variants, modes and windows are discretisation choices: the paper's
+figures still apply to them (a coarse mesh may fail a row, which is the mesh's error to read).
+"""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -10,9 +20,39 @@ import numpy as np
 from fxflex.analysis.compare_plan import C3, DAMPING_RPM, LINEAR
 from fxflex.formulation import PAPER_INTEGRATION
 from fxflex.io.payload import COMPONENTS
-from fxflex.scene import METHODS, PAPER_RPM
+from fxflex.scene import METHODS, PAPER_RPM, Scene
 
-__all__ = ["paper_rows"]
+__all__ = ["paper_rows", "paper_scene_differences", "not_applicable", "NOT_APPLICABLE"]
+
+#: the paper column of a row on a scene that is not the paper's (issue 14)
+NOT_APPLICABLE = "n/a (not the paper's scene)"
+#: the tables that define the paper's body and loading (SPEC section 1; tip_mass: section 10)
+BODY_TABLES = ("geometry", "material", "load", "tip_mass")
+
+
+def paper_scene_differences(scene: Scene) -> list[str]:
+    """``key = value`` for every key that makes ``scene`` another body or loading than the
+    paper's (the tables of :data:`BODY_TABLES` away from their defaults, an imported mesh);
+    empty for the paper's scene, whatever its meshes, elements, modes and speeds."""
+    paper, ours = Scene().to_dict(), scene.to_dict()
+    out = [f"{table}.{key} = {json.dumps(value)}" for table in BODY_TABLES
+           for key, value in ours[table].items() if value != paper[table][key]]
+    if scene.mesh.solid_file:
+        out.append(f"mesh.solid_file = {json.dumps(scene.mesh.solid_file)}")
+    return out
+
+
+def not_applicable(rows: list[dict]) -> list[dict]:
+    """The rows with the paper's figure replaced by :data:`NOT_APPLICABLE` (kept as
+    ``paper_on_its_scene``) and no verdict: ours only, side by side."""
+    out = []
+    for f in rows:
+        g = {**f, "paper": NOT_APPLICABLE, "paper_on_its_scene": f["paper"], "pass": None,
+             "applicable": False}
+        if "q1_pass" in g:                  # study 1b's rows: no verdict on either mesh
+            g.update(q1_pass=None, locking=False)
+        out.append(g)
+    return out
 
 
 def _tip(rows, method, rpm, c=C3, model="relative"):

@@ -7,11 +7,24 @@ import math
 
 from fxflex.scene import PAPER_DAMPING, Scene
 
-__all__ = ["render"]
+__all__ = ["render", "how", "verdict"]
 
 HOW = {"value": "within 1 point", "bound": "at most the paper's bound",
        "approximate": "within 10 % of the paper's 'approximately'", "verdict": "same verdict",
        "zero": "below 1e-6 % (round-off)", "trend": "the paper's trend", "speedup": "ratio"}
+
+
+def how(f: dict) -> str:
+    """How a row is compared: ``HOW`` of its kind, or "n/a" on a scene that is not the paper's
+    (:func:`fxflex.analysis.compare_paper.not_applicable`)."""
+    return "n/a" if f.get("applicable") is False else HOW[f["kind"]]
+
+
+def verdict(f: dict, key: str = "pass") -> str:
+    """pass / FAIL / - (undecided), or n/a on a scene that is not the paper's."""
+    if f.get("applicable") is False:
+        return "n/a"
+    return {True: "pass", False: "FAIL", None: "-"}[f[key]]
 
 
 def _f(x, spec=".5f"):
@@ -48,7 +61,14 @@ def render(scene: Scene, r: dict) -> str:
     w = r["windows"]
     tlf = "the paper window" if w["tlf_s"] is None else ", ".join(
         f"{k} {v * 1e3:g} ms" for k, v in w["tlf_s"].items())
-    lines = ["# fxflex compare: the paper's Sect. 4 on one scene", "",
+    other = r.get("scene_differences") or []
+    lines = ["# fxflex compare: the paper's Sect. 4 on one scene", ""]
+    if other:
+        lines += ["**Not the paper's scene** (" + ", ".join(f"`{d}`" for d in other) + "): the "
+                  "same studies as on the paper's scene, all methods side by side; the paper's "
+                  "figures (section 2, 2b) are about its own blade and are marked "
+                  "\"n/a (not the paper's scene)\", without a verdict.", ""]
+    lines += [
              f"Scene `{scene.hash}`: solid mesh {list(scene.mesh.solid)}, "
              f"{scene.mesh.beam_elements} beam elements, {scene.reduction.ffrf_modes} FFRF modes, "
              f"{scene.reduction.gcms_modes} GCMS global modes (before the Gram cut). Methods: "
@@ -82,7 +102,8 @@ def _steady(r) -> list[str]:
             " deflections in mm. `stable`: no eigenvalue of the linearised rotating system with "
             "positive real part (`-`: the method offers no eigenvalue analysis); `max Re lambda`: "
             "the largest real part. `sigma_X`: the largest and smallest axial stress at the "
-            "corners of the root section, from the section forces that the elastic force on the "
+            "corners of the root section (another shape: the vertices of its outer contour), "
+            "from the section forces that the elastic force on the "
             "root coordinates carries (beam theory's linear distribution over the section). "
             "`torque`: the drive torque at the equilibrium (relative coordinates at rest; zero "
             "up to round-off with relative damping).", "",
@@ -96,12 +117,18 @@ def _paper(r) -> list[str]:
     for f in r["paper"]:
         ours = f"{f['ours']:.3g}" if isinstance(f["ours"], float) and abs(f["ours"]) < 1e-3 \
             else (f"{f['ours']:.2f}" if isinstance(f["ours"], float) else str(f["ours"]))
-        verdict = {True: "pass", False: "FAIL", None: "-"}[f["pass"]]
-        rows.append([f["figure"], ours, f["paper"], HOW[f["kind"]], verdict])
+        rows.append([f["figure"], ours, f["paper"], how(f), verdict(f)])
     n_pass = sum(1 for f in r["paper"] if f["pass"])
-    return ["## 2. SPEC section 7: ours next to the paper's", "",
-            f"{n_pass} of {len(r['paper'])} pass. The last rows (Sect. 4.2 and Fig. 5) are "
-            "claims about the paper's own code and step choice: we report ours either way.", "",
+    if r.get("scene_differences"):
+        said = (f"{len(r['paper'])} rows, ours only: the paper's figures are about its own "
+                "blade (SPEC section 1), so on this scene they are not applicable and no row "
+                "has a verdict. Each row reads the same equilibria and runs as on the paper's "
+                "scene, so the methods stand side by side.")
+    else:
+        said = (f"{n_pass} of {len(r['paper'])} pass. The last rows (Sect. 4.2 and Fig. 5) "
+                "are claims about the paper's own code and step choice: we report ours either "
+                "way.")
+    return ["## 2. SPEC section 7: ours next to the paper's", "", said, "",
             *_table(["figure", "ours", "paper", "how compared", "pass"], rows), ""]
 
 
@@ -114,9 +141,8 @@ def _accurate(scene: Scene, r: dict) -> list[str]:
     dof = sorted({s["dof"] for s in acc["steady"]})
     rows, locking = [], []
     for f in acc["paper"]:
-        verdict = {True: "pass", False: "FAIL", None: "-"}
-        rows.append([f["figure"], f"{f['q1_ours']:.3g}", verdict[f["q1_pass"]],
-                     f"{f['ours']:.3g}", verdict[f["pass"]], f["paper"],
+        rows.append([f["figure"], f"{f['q1_ours']:.3g}", verdict(f, "q1_pass"),
+                     f"{f['ours']:.3g}", verdict(f), f["paper"],
                      "the Q1 mesh's locking" if f["locking"] else ""])
         if f["locking"]:
             locking.append(f["figure"])
@@ -124,6 +150,9 @@ def _accurate(scene: Scene, r: dict) -> list[str]:
             "fail because of the Q1 mesh's locking (its equilibria are 1.6-2.2 % stiff on this "
             "blade, docs/accuracy.md), not because of the formulations." if locking else
             f"No row that fails on the scene's Q1 mesh passes with Q{degree}.")
+    if r.get("scene_differences"):
+        said = (f"Not the paper's scene: the rows give ours with Q1 and Q{degree} side by side, "
+                "without a verdict; their difference is the Q1 mesh's error on this body.")
     return ["## 2b. The rows decided by equilibria, with accurate solids", "",
             f"The solid methods' equilibria again with Q{degree} elements on {mesh} "
             f"({', '.join(map(str, dof))} unknowns, against the scene's Q1 mesh "
