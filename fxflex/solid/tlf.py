@@ -123,7 +123,7 @@ class TLF(FormulationBase):
     # -- Formulation interface --------------------------------------------------------------------
     def steady_state(self) -> SteadyState:
         if self._steady is None:
-            self._steady = tlf_steady(self.model)
+            self._steady = tlf_steady(self.model, linear=self.options.linear or "direct")
         return self._steady
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:

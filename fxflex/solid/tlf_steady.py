@@ -36,8 +36,9 @@ _STAGE_OMEGA = 2 * math.pi * 6000 / 60
 
 
 def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1e-10,
-               max_it: int = 30) -> SteadyState:
-    """Rotating-frame TLF equilibrium at speed omega (rad/s; default the scene's)."""
+               max_it: int = 30, linear: str = "direct") -> SteadyState:
+    """Rotating-frame TLF equilibrium at speed omega (rad/s; default the scene's), its Newton
+    steps solved by the ``linear`` route (:func:`fxflex.solid.solvers.newton`)."""
     omega = model.scene.rotation.omega if omega is None else omega
     t0 = time.perf_counter()
     U = fem.Function(model.V)
@@ -57,15 +58,16 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
     F_ext = model.rotating_load()
     t_setup = time.perf_counter() - t0
     stages = max(1, math.ceil((omega / _STAGE_OMEGA) ** 2))
-    residuals, iterations, converged = [], 0, True
+    residuals, iterations, converged, krylov = [], 0, True, []
     timings = {"setup": t_setup, "assemble": 0.0, "factor_solve": 0.0}
     for k in range(1, stages + 1):
         w2.value = omega**2 * k / stages
         if absolute:
             w1.value = math.sqrt(w2.value)
         res = newton(R, J, U, [model.bc], rhs=F_ext, rtol=rtol, max_it=max_it,
-                     symmetric=not absolute, extra=extra)
+                     symmetric=not absolute, extra=extra, linear=linear)
         residuals = res.residuals
+        krylov += res.krylov
         iterations += res.iterations
         for key in ("assemble", "factor_solve"):
             timings[key] += res.timings[key]
@@ -75,4 +77,5 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
     tip = model.tip_displacement(U.x.array)
     return SteadyState(tip=tip, q=U.x.array[: model.n_owned].copy(), iterations=iterations,
                        residuals=residuals, converged=converged, timings=timings,
-                       extra={"continuation_stages": stages})
+                       extra={"continuation_stages": stages, "linear": linear,
+                              **({"krylov_iterations": krylov} if krylov else {})})
