@@ -79,10 +79,10 @@ INVARIANTS = 12e3
 Q2_FACTOR = 1.3
 #: iterative route (per unknown): GAMG's hierarchy (coarse operators of six rigid-body modes per
 #: aggregate, prolongators), the Chebyshev smoothers' and Krylov vectors. Measured peaks of TLF
-#: steady, serial (docs/solvers.md): 323 MB at 58752 unknowns (128 x 16 x 8), 3.31 GB at
-#: 1033200 (400 x 40 x 20), i.e. 3.06 kB per unknown in all; raised by 12 % like the others, less
-#: the mesh and matrices part. FFRF and GCMS (one hierarchy inside SLEPc's shift-and-invert) are
-#: given TLF's figure, not measured
+#: steady, serial (docs/solvers.md): 323 MB at 58752 unknowns (128 x 16 x 8), 707 MB at 187200
+#: (192 x 24 x 12), 3.31 GB at 1033200 (400 x 40 x 20), i.e. 3.0 to 3.1 kB per unknown in all;
+#: raised by 12 % like the others, less the mesh and matrices part. FFRF and GCMS (one
+#: hierarchy inside SLEPc's shift-and-invert) are given TLF's figure, not measured
 ITERATIVE = {"ffrf": 600.0, "gcms": 600.0, "tlf": 600.0}
 #: the solid parts grow by this fraction per rank beyond the first (TLF 128 x 16 x 8 on 2 ranks:
 #: 2 x 558 MB at most against 808 MB on one)

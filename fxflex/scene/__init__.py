@@ -9,7 +9,7 @@ from fxflex.scene.schema import (METHODS, PAPER_DAMPING, PAPER_RPM, Damping, Geo
 
 __all__ = [
     "Scene", "Geometry", "Material", "Section", "Load", "Rotation", "Damping", "MeshSpec",
-    "Reduction", "TipMass", "Solver", "Drive", "load_scene", "parse_override", "scene_from_dict", "validate",
-    "validate_for",
+    "Reduction", "TipMass", "Solver", "Drive", "load_scene", "parse_override", "scene_from_dict",
+    "validate", "validate_for",
     "METHODS", "PAPER_RPM", "PAPER_DAMPING",
 ]
