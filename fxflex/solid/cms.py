@@ -12,7 +12,8 @@ inverse is a CG solve with GAMG and the rigid-body near-nullspace, converged to 
 the eigen tolerance, so that the inexact inverse leaves the eigenpairs' residuals at tol. The
 clamped rows carry 1 on the diagonal of K_L and 0 on that of M: their eigenvalues are infinite
 and never reach the target (the iterative route's modes are set to zero there exactly, as the
-factorisation's are). Each mode is scaled to x^T M x = 1 and its sign fixed so that the largest tip-centre component is positive (deterministic across ranks).
+factorisation's are). Each mode is scaled to x^T M x = 1 and its sign fixed so that the largest
+tip-centre component is positive (deterministic across ranks).
 
 Everything the eigenmodes depend on is the scene's geometry, material and mesh, so they are
 cached on disk (:mod:`fxflex.cache`, kind ``modes``) keyed by the mesh key, the material, the
