@@ -28,7 +28,7 @@ folded into one factorised iteration matrix S = m M + c C_t + k K_t.
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
@@ -60,6 +60,8 @@ class BuildOptions:
     force_eval: str | None = None   # None: the method's default (FORCE_EVAL[method][0])
     mass: str | None = None         # TLF: "consistent" (Eq. 29) or "lumped" (row sum); None: default
     need_steady: bool = True        # False: skip work only the steady state needs
+    linear: str | None = None       # solids: "direct" | "iterative"; None: [solver] linear, with
+                                    # "auto" resolved by build() (fxflex.memory.check)
 
 
 @dataclass
@@ -409,7 +411,9 @@ def build(method: str, scene: Scene, comm, options: BuildOptions | None = None) 
     options = options or BuildOptions()
     check_options(method, options)
     validate_for(method, scene)
-    memory.check(method, scene, comm, options)
+    fits = memory.check(method, scene, comm, options)
+    if method in memory.SOLIDS:     # the linear solver route, "auto" resolved (docs/solvers.md)
+        options = replace(options, linear=memory.route(scene, fits, options))
     try:
         module = importlib.import_module(_MODULES[method])
     except ModuleNotFoundError as exc:

@@ -24,6 +24,13 @@ rank; :func:`check` adds up the ranks that share one machine and compares that w
 :func:`available` memory, refusing the build with one line (:class:`~fxflex.errors.FxflexError`)
 that names the estimate, what is available and the largest size that fits.
 ``FXFLEX_MEMORY_CHECK=0`` skips the check; ``FXFLEX_MEMORY_LIMIT=8G`` caps what it counts on.
+
+The solids' linear systems go one of two routes (``[solver] linear``, docs/solvers.md): direct
+(MUMPS, the ``factorisation`` part above) or iterative (GAMG-preconditioned Krylov, whose
+``preconditioner`` part -- the coarse operators, prolongators and smoother and Krylov vectors --
+grows as n, not n^(4/3)). With "auto" :func:`check` takes the direct route whenever it fits,
+which is what every build did before the key existed, and else the iterative one; it refuses
+only when neither fits.
 """
 
 from __future__ import annotations
@@ -42,7 +49,7 @@ from fxflex.scene import METHODS, Scene
 if TYPE_CHECKING:
     from fxflex.formulation import BuildOptions
 
-__all__ = ["Estimate", "estimate", "available", "check", "parse_size", "format_size",
+__all__ = ["Estimate", "estimate", "available", "check", "route", "parse_size", "format_size",
            "BEAMS", "SOLIDS"]
 
 BEAMS = ("lebb", "nebb", "ancf")
@@ -70,6 +77,13 @@ INVARIANTS = 12e3
 #: 35100 unknowns (50 x 6 x 4), 956 MB at 58752 (64 x 8 x 4), 1.15 and 1.07 times the Q1 law;
 #: FFRF 792 MB at 58752 -- raised by 12 % as the Q1 coefficients were
 Q2_FACTOR = 1.3
+#: iterative route (per unknown): GAMG's hierarchy (coarse operators of six rigid-body modes per
+#: aggregate, prolongators), the Chebyshev smoothers' and Krylov vectors. Measured peaks of TLF
+#: steady, serial (docs/solvers.md): 323 MB at 58752 unknowns (128 x 16 x 8), 707 MB at 187200
+#: (192 x 24 x 12), 3.31 GB at 1033200 (400 x 40 x 20), i.e. 3.0 to 3.1 kB per unknown in all;
+#: raised by 12 % like the others, less the mesh and matrices part. FFRF and GCMS (one
+#: hierarchy inside SLEPc's shift-and-invert) are given TLF's figure, not measured
+ITERATIVE = {"ffrf": 600.0, "gcms": 600.0, "tlf": 600.0}
 #: the solid parts grow by this fraction per rank beyond the first (TLF 128 x 16 x 8 on 2 ranks:
 #: 2 x 558 MB at most against 808 MB on one)
 MPI_OVERHEAD = 0.1
@@ -82,6 +96,7 @@ class Estimate:
     method: str
     parts: dict[str, float]
     ranks: int = 1
+    route: str | None = None        # solids: "direct" or "iterative" (docs/solvers.md)
 
     @property
     def total(self) -> float:
@@ -94,10 +109,12 @@ class Estimate:
         return f"about {format_size(self.total)}" + (f" ({inner})" if inner else "")
 
 
-def estimate(method: str, scene: Scene, ranks: int = 1, options: BuildOptions | None = None
-             ) -> Estimate:
+def estimate(method: str, scene: Scene, ranks: int = 1, options: BuildOptions | None = None,
+             route: str | None = None) -> Estimate:
     """The peak memory of building ``method`` for ``scene`` with ``options`` and solving its
-    steady state (or running it) on ``ranks`` ranks of one machine (module docstring)."""
+    steady state (or running it) on ``ranks`` ranks of one machine (module docstring), its
+    linear systems by ``route`` (solids; default: the options' or the scene's
+    ``[solver] linear``, "auto" counted as direct)."""
     if method not in METHODS:
         raise FxflexError(f"--method: {method!r} is not a method; allowed: {' '.join(METHODS)}")
     ranks = max(1, int(ranks))
@@ -111,8 +128,13 @@ def estimate(method: str, scene: Scene, ranks: int = 1, options: BuildOptions | 
     n = _unknowns(scene.mesh.solid, degree)
     per_unknown, factor = SOLID[method]
     scale = 1.0 if degree == 1 else Q2_FACTOR
-    parts = {"base": ranks * SOLID_BASE, "mesh and matrices": scale * per_unknown * n,
-             "factorisation": scale * factor * n ** (4.0 / 3.0)}
+    route = route or _requested(scene, options)
+    route = "direct" if route == "auto" else route
+    parts = {"base": ranks * SOLID_BASE, "mesh and matrices": scale * per_unknown * n}
+    if route == "direct":
+        parts["factorisation"] = scale * factor * n ** (4.0 / 3.0)
+    else:
+        parts["preconditioner"] = scale * ITERATIVE[method] * n
     if method == "ffrf":
         parts["modes"] = PER_MODE * n * scene.reduction.ffrf_modes
     elif method == "gcms":
@@ -124,7 +146,22 @@ def estimate(method: str, scene: Scene, ranks: int = 1, options: BuildOptions | 
             parts["mass factorisation"] = scale * SOLID["ffrf"][1] * n ** (4.0 / 3.0)
     # a distributed factor and mesh carry ghosts and halo copies: measured +10 % at 2 ranks
     spread = 1.0 + MPI_OVERHEAD * (ranks - 1)
-    return Estimate(method, {k: v if k == "base" else spread * v for k, v in parts.items()}, ranks)
+    return Estimate(method, {k: v if k == "base" else spread * v for k, v in parts.items()}, ranks,
+                    route)
+
+
+def _requested(scene: Scene, options: BuildOptions | None) -> str:
+    """The route asked for: the options' resolved one, else the scene's ``[solver] linear``."""
+    return getattr(options, "linear", None) or scene.solver.linear
+
+
+def route(scene: Scene, estimate: Estimate | None, options: BuildOptions | None = None) -> str:
+    """The linear solver route of a solid build: the one :func:`check` chose, else (check
+    skipped) the one asked for, "auto" meaning direct as before the key existed."""
+    if estimate is not None and estimate.route is not None:
+        return estimate.route
+    wanted = _requested(scene, options)
+    return "direct" if wanted == "auto" else wanted
 
 
 def _unknowns(divisions, degree: int = 1) -> float:
@@ -232,11 +269,12 @@ def format_size(n: float) -> str:
 # -- the check before a build ------------------------------------------------------------------
 
 def _largest(method: str, scene: Scene, ranks: int, room: float,
-             options: BuildOptions | None) -> str:
+             options: BuildOptions | None, way: str | None = None) -> str:
     """What fits in ``room`` bytes: the largest beam element count, or the largest solid mesh of
-    the scene's proportions (bisection on the estimate, which grows with the size)."""
+    the scene's proportions on the linear solver route ``way`` (bisection on the estimate,
+    which grows with the size)."""
     def fits(s: float) -> bool:
-        return estimate(method, _scaled(method, scene, s), ranks, options).total <= room
+        return estimate(method, _scaled(method, scene, s), ranks, options, way).total <= room
 
     if not fits(1e-9):
         return "nothing: the libraries alone need more"
@@ -266,8 +304,10 @@ def _scaled(method: str, scene: Scene, s: float) -> Scene:
 def check(method: str, scene: Scene, comm, options: BuildOptions | None = None
           ) -> Estimate | None:
     """Refuse (FxflexError, on every rank) a build whose estimate exceeds the available memory of
-    a machine it runs on; the ranks of one machine (MPI shared-memory node) are added up. Returns
-    the estimate, or None when ``FXFLEX_MEMORY_CHECK=0``. Collective."""
+    a machine it runs on; the ranks of one machine (MPI shared-memory node) are added up. A
+    solid with ``[solver] linear = "auto"`` takes the direct route when it fits and the
+    iterative one otherwise. Returns the estimate (its ``route`` the one chosen), or None when
+    ``FXFLEX_MEMORY_CHECK=0``. Collective."""
     if os.environ.get("FXFLEX_MEMORY_CHECK", "").strip() == "0":
         return None
     from mpi4py import MPI
@@ -277,19 +317,27 @@ def check(method: str, scene: Scene, comm, options: BuildOptions | None = None
     local_ranks = node.size if node is not None else 1
     if node is not None:
         node.Free()
-    mine = estimate(method, scene, comm.size, options)
-    need = mine.total * local_ranks / comm.size
     room = available()
-    worst = comm.allreduce((room / need if room is not None else math.inf, comm.rank), op=MPI.MIN)
-    need, room, local_ranks = comm.bcast((need, room, local_ranks), root=worst[1])
-    if worst[0] >= 1.0:
-        return mine
+    wanted = _requested(scene, options)
+    routes = [None] if method in BEAMS else (
+        ["direct", "iterative"] if wanted == "auto" else [wanted])
+    for way in routes:
+        mine = estimate(method, scene, comm.size, options, route=way)
+        need = mine.total * local_ranks / comm.size
+        worst = comm.allreduce((room / need if room is not None else math.inf, comm.rank),
+                               op=MPI.MIN)
+        if worst[0] >= 1.0:
+            return mine
+    # the message names the tightest rank's figures
+    room, local_ranks = comm.bcast((room, local_ranks), root=worst[1])
     key = "mesh.beam_elements" if method in BEAMS else "mesh.solid"
     value = scene.mesh.beam_elements if method in BEAMS else list(scene.mesh.solid)
     share = f" ({local_ranks} ranks on one machine)" if comm.size > 1 else ""
     node_est = Estimate(method, {k: v * local_ranks / comm.size for k, v in mine.parts.items()})
+    way = f" (linear solver {mine.route})" if mine.route else ""
+    largest = _largest(method, scene, comm.size, room * comm.size / local_ranks, options,
+                       mine.route)
     raise FxflexError(
-        f"{key} = {value}: the {method} build needs {node_est.describe()}{share}; "
-        f"{format_size(room)} available; allowed: "
-        f"{_largest(method, scene, comm.size, room * comm.size / local_ranks, options)} "
+        f"{key} = {value}: the {method} build{way} needs {node_est.describe()}{share}; "
+        f"{format_size(room)} available; allowed: {largest} "
         f"(FXFLEX_MEMORY_CHECK=0 builds anyway)")

@@ -17,7 +17,8 @@ from slepc4py import SLEPc
 
 from fxflex.numerics.qep import EigenNotConverged
 
-__all__ = ["pep_eigen", "make_direct", "PetscLinearisation", "TOL", "MAX_IT"]
+__all__ = ["pep_eigen", "make_direct", "make_iterative", "rigid_body_modes", "ROUTES",
+           "PetscLinearisation", "TOL", "MAX_IT"]
 
 #: relative residual the PEP converges each root to, by default
 TOL = 1e-10
@@ -32,6 +33,72 @@ def make_direct(ksp: PETSc.KSP, *, symmetric: bool = True) -> PETSc.KSP:
     pc = ksp.getPC()
     pc.setType("cholesky" if symmetric else "lu")
     pc.setFactorSolverType("mumps")
+    return ksp
+
+
+#: linear solver routes of ``[solver] linear`` once "auto" is resolved (fxflex.memory.check)
+ROUTES = ("direct", "iterative")
+#: Krylov iterations before an iterative solve gives up (GAMG on these meshes: tens)
+KRYLOV_MAX_IT = 2000
+
+
+def rigid_body_modes(V) -> PETSc.NullSpace:
+    """The six rigid-body motions of the solid on the nodes of the vector space ``V`` (three
+    translations e_i and three rotations e_i x X about the origin, on the undeformed dof
+    coordinates X), orthonormalised by modified Gram-Schmidt: the near-nullspace GAMG builds
+    its coarse spaces from (dolfinx 0.5 has no helper). Collective on V's communicator."""
+    from dolfinx import la
+
+    imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
+    owned = imap.size_local
+    X = V.tabulate_dof_coordinates()[:owned]
+    vecs = [la.create_petsc_vector(imap, bs) for _ in range(6)]
+    for i in range(6):
+        block = np.zeros((owned, 3))
+        if i < 3:
+            block[:, i] = 1.0
+        else:                                   # e_k x X for k = i - 3
+            e = np.zeros(3)
+            e[i - 3] = 1.0
+            block[:] = np.cross(e, X)
+        vecs[i].setArray(block.reshape(-1))
+    for i, v in enumerate(vecs):
+        for w in vecs[:i]:
+            v.axpy(-v.dot(w), w)
+        v.normalize()
+    return PETSc.NullSpace().create(vectors=vecs, comm=V.mesh.comm)
+
+
+def make_iterative(ksp: PETSc.KSP, *, symmetric: bool = True, rtol: float = 1e-10,
+                   nullspace: PETSc.NullSpace | None = None) -> PETSc.KSP:
+    """Turn ``ksp`` into a GAMG-preconditioned Krylov solve: CG when symmetric (the tangent of a
+    stable steady state and K_L are positive definite), GMRES otherwise (the circulatory term
+    of the absolute damping), right-preconditioned. Both stop on the true residual,
+    ||b - A x|| <= rtol ||b||, so that ``rtol`` means what a direct solve's round-off would.
+    ``nullspace`` (:func:`rigid_body_modes`) is set as the operator's near-nullspace, the coarse
+    spaces of smoothed aggregation for elasticity. A solve that does not converge raises."""
+    if symmetric:
+        ksp.setType("cg")
+        ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
+    else:
+        ksp.setType("gmres")
+        ksp.setGMRESRestart(100)
+        ksp.setPCSide(PETSc.PC.Side.RIGHT)
+        ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
+    ksp.setTolerances(rtol=rtol, atol=0.0, max_it=KRYLOV_MAX_IT)
+    ksp.setErrorIfNotConverged(True)
+    pc = ksp.getPC()
+    pc.setType("gamg")
+    pc.setGAMGType("agg")
+    if not symmetric:
+        # smoothed aggregation reads the matrix graph as undirected: symmetrise it
+        opts, key = PETSc.Options(), f"{ksp.getOptionsPrefix() or ''}pc_gamg_sym_graph"
+        opts[key] = True
+        pc.setFromOptions()
+        opts.delValue(key)
+    if nullspace is not None:
+        A, _ = ksp.getOperators()
+        A.setNearNullSpace(nullspace)
     return ksp
 
 

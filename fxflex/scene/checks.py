@@ -92,6 +92,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "mesh.ancf_root": ("free-axial", "full"),
     "mesh.solid_degree": (1, 2),
     "mesh.beam_variant": ("paper", "locking-free"),
+    "solver.linear": ("auto", "direct", "iterative"),
 }
 
 

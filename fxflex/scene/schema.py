@@ -21,7 +21,7 @@ from fxflex.scene.checks import check_keys, check_scene, check_section
 
 __all__ = [
     "Geometry", "Material", "Section", "Load", "Rotation", "Damping", "MeshSpec", "Reduction",
-    "TipMass", "Scene", "PAPER_RPM", "PAPER_DAMPING", "METHODS",
+    "TipMass", "Solver", "Scene", "PAPER_RPM", "PAPER_DAMPING", "METHODS",
 ]
 
 METHODS = ("ffrf", "gcms", "tlf", "lebb", "nebb", "ancf")
@@ -32,7 +32,7 @@ LATER_KEYS = ("mesh.solid_degree", "mesh.beam_variant", "geometry.section", "geo
               "geometry.contour", "geometry.wall", "geometry.stations", "mesh.solid_file")
 #: whole tables beyond the paper's scene (SPEC section 10): left out of the hash when every key
 #: is at its default
-LATER_TABLES = ("tip_mass",)
+LATER_TABLES = ("tip_mass", "solver")
 PAPER_DAMPING = (100.0, 500.0, 1000.0)
 
 
@@ -205,6 +205,19 @@ class TipMass:
 
 
 @dataclass(frozen=True)
+class Solver:
+    """How the linear systems of the solid methods are solved (issue 14, docs/solvers.md):
+    ``linear`` = "direct" (MUMPS), "iterative" (GAMG-preconditioned Krylov; SLEPc with an
+    iterative inner solve) or "auto", direct whenever the memory estimate says MUMPS fits
+    (:func:`fxflex.memory.check`), else iterative. Not in the hash while at its default."""
+
+    linear: str = "auto"
+
+    def __post_init__(self) -> None:
+        check_section(self, "solver")
+
+
+@dataclass(frozen=True)
 class Scene:
     geometry: Geometry = field(default_factory=Geometry)
     material: Material = field(default_factory=Material)
@@ -215,6 +228,7 @@ class Scene:
     mesh: MeshSpec = field(default_factory=MeshSpec)
     reduction: Reduction = field(default_factory=Reduction)
     tip_mass: TipMass = field(default_factory=TipMass)
+    solver: Solver = field(default_factory=Solver)
 
     def __post_init__(self) -> None:
         check_scene(self)

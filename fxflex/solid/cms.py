@@ -7,9 +7,13 @@ component modes are the lowest eigenpairs of
 
 with K_L the linear stiffness (Eq. 14) and M = M_ff the consistent mass (Eq. 11). SLEPc solves the
 generalised Hermitian problem by shift-and-invert about 0 (MUMPS Cholesky of K_L), distributed over
-the model's communicator. The clamped rows carry 1 on the diagonal of K_L and 0 on that of M: their
-eigenvalues are infinite and never reach the target. Each mode is scaled to x^T M x = 1 and its
-sign fixed so that the largest tip-centre component is positive (deterministic across ranks).
+the model's communicator; on the iterative route (``[solver] linear``, docs/solvers.md) each
+inverse is a CG solve with GAMG and the rigid-body near-nullspace, converged to INNER_FACTOR of
+the eigen tolerance, so that the inexact inverse leaves the eigenpairs' residuals at tol. The
+clamped rows carry 1 on the diagonal of K_L and 0 on that of M: their eigenvalues are infinite
+and never reach the target (the iterative route's modes are set to zero there exactly, as the
+factorisation's are). Each mode is scaled to x^T M x = 1 and its sign fixed so that the largest
+tip-centre component is positive (deterministic across ranks).
 
 Everything the eigenmodes depend on is the scene's geometry, material and mesh, so they are
 cached on disk (:mod:`fxflex.cache`, kind ``modes``) keyed by the mesh key, the material, the
@@ -97,10 +101,19 @@ def modes_key(model: SolidModel, count: int, tol: float) -> str:
         "code": cache.code_version(*CODE_MODULES)})
 
 
+#: the iterative route's inner CG tolerance, relative to the eigen tolerance (module docstring)
+INNER_FACTOR = 0.1
+#: ... but no tighter than this: the true residual of a CG solve in double precision stalls
+#: near kappa * eps ||x|| / ||b||, above 1e-14 on these meshes
+INNER_MIN = 1e-13
+
+
 def clamped_modes(model: SolidModel, count: int, *, K: PETSc.Mat | None = None,
                   M: PETSc.Mat | None = None, tol: float = 1e-12,
-                  use_cache: bool = True) -> ClampedModes:
-    """The ``count`` lowest clamped eigenmodes of (K_L, M) on ``model.comm``.
+                  use_cache: bool = True, linear: str = "direct") -> ClampedModes:
+    """The ``count`` lowest clamped eigenmodes of (K_L, M) on ``model.comm``, the inverse of K_L
+    applied by the ``linear`` route ("direct" or "iterative"; one cache entry serves both: they
+    agree to the eigen tolerance).
 
     K and M may be passed when the caller has assembled them already (they must carry the clamp
     as :func:`mass_and_stiffness` does); on a cache hit they are not needed. Collective.
@@ -114,15 +127,18 @@ def clamped_modes(model: SolidModel, count: int, *, K: PETSc.Mat | None = None,
         if hit is not None:
             hit.timings["cache_load"] = time.perf_counter() - t0
             return hit
-    modes = _solve(model, count, K, M, tol)
+    modes = _solve(model, count, K, M, tol, linear)
     if key is not None:
         _write(model, key, modes)
     return modes
 
 
-def _solve(model: SolidModel, count: int, K, M, tol: float) -> ClampedModes:
+def _solve(model: SolidModel, count: int, K, M, tol: float, linear: str) -> ClampedModes:
     from slepc4py import SLEPc
 
+    from dolfinx.fem.petsc import set_bc
+
+    from fxflex.numerics.petsc import make_iterative, rigid_body_modes
     from fxflex.solid.solvers import make_direct
 
     t0 = time.perf_counter()
@@ -138,7 +154,11 @@ def _solve(model: SolidModel, count: int, K, M, tol: float) -> ClampedModes:
     st = eps.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
     st.setShift(0.0)
-    make_direct(st.getKSP())
+    if linear == "iterative":
+        make_iterative(st.getKSP(), rtol=max(INNER_MIN, INNER_FACTOR * tol),
+                       nullspace=rigid_body_modes(model.V))
+    else:
+        make_direct(st.getKSP())
     eps.setTolerances(tol, 500)
     eps.solve()
     nconv = eps.getConverged()
@@ -157,6 +177,8 @@ def _solve(model: SolidModel, count: int, K, M, tol: float) -> ClampedModes:
     errors = np.empty(count)
     for j, (lam, i) in enumerate(pairs[:count]):
         eps.getEigenpair(i, x)
+        if linear == "iterative":      # exactly zero on the clamp, as the direct route's are
+            set_bc(x, [model.bc])
         M.mult(x, Mx)
         x.scale(1.0 / np.sqrt(x.dot(Mx)))
         omega2[j] = lam

@@ -100,7 +100,7 @@ class FFRF(ReducedFormulation):
     def __init__(self, scene: Scene, comm, options: BuildOptions | None = None, *,
                  modes: ClampedModes | None = None, model: SolidModel | None = None,
                  data: MeshData | None = None):
-        super().__init__(scene, comm)
+        super().__init__(scene, comm, options)
         t0 = time.perf_counter()
         count = scene.reduction.ffrf_modes
         cached = self._use(count, model, data, modes)

@@ -185,7 +185,7 @@ class GCMS(ReducedFormulation):
     def __init__(self, scene: Scene, comm, options: BuildOptions | None = None, *,
                  modes: ClampedModes | None = None, model: SolidModel | None = None,
                  data: MeshData | None = None):
-        super().__init__(scene, comm)
+        super().__init__(scene, comm, options)
         n_global = scene.reduction.gcms_modes
         if n_global % 3:
             raise FxflexError(f"reduction.gcms_modes: must be a multiple of 3 (the global modes "

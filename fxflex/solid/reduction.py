@@ -235,9 +235,11 @@ class ReducedFormulation(FormulationBase):
     #: root-stress map are this one's too, built (once, there) when either first asks
     _source = None
 
-    def __init__(self, scene: Scene, build_comm):
+    def __init__(self, scene: Scene, build_comm, options=None):
         self.scene = scene
         self.build_comm = build_comm
+        # the clamped modes' linear solver route ([solver] linear, resolved by build)
+        self.linear = (options.linear if options is not None else None) or "direct"
         self.comm = MPI.COMM_SELF
         self.drive = Drive(scene.rotation)
         self.c_rho = scene.damping.c / scene.material.rho
@@ -469,7 +471,7 @@ class ReducedFormulation(FormulationBase):
             t0 = time.perf_counter()
             d = self._data
             self._modes = clamped_modes(self.model, self._count, K=d.K if d else None,
-                                        M=d.M if d else None)
+                                        M=d.M if d else None, linear=self.linear)
             self.timings["eigenmodes"] = time.perf_counter() - t0
         return self._modes
 

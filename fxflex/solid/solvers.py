@@ -1,4 +1,5 @@
-"""PETSc-specific helpers for the solid formulations: direct solvers and a Newton loop."""
+"""PETSc-specific helpers for the solid formulations: direct or iterative linear solvers and a
+Newton loop (docs/solvers.md)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,10 @@ import numpy as np
 from dolfinx import fem
 from petsc4py import PETSc
 
-from fxflex.numerics.petsc import make_direct
+from fxflex.numerics.petsc import ROUTES, make_direct, make_iterative, rigid_body_modes
 
-__all__ = ["direct_solver", "make_direct", "newton", "NewtonResult"]
+__all__ = ["direct_solver", "iterative_solver", "linear_solver", "make_direct", "newton",
+           "NewtonResult", "ROUTES"]
 
 
 def direct_solver(A: PETSc.Mat, *, symmetric: bool = True) -> PETSc.KSP:
@@ -23,6 +25,33 @@ def direct_solver(A: PETSc.Mat, *, symmetric: bool = True) -> PETSc.KSP:
     return make_direct(ksp, symmetric=symmetric)
 
 
+def iterative_solver(A: PETSc.Mat, V, *, symmetric: bool = True,
+                     rtol: float = 1e-10) -> PETSc.KSP:
+    """CG (GMRES when not ``symmetric``) with GAMG on A, the rigid-body modes of the vector space
+    ``V`` as its near-nullspace (:func:`fxflex.numerics.petsc.make_iterative`)."""
+    ksp = PETSc.KSP().create(A.getComm())
+    ksp.setOperators(A)
+    return make_iterative(ksp, symmetric=symmetric, rtol=rtol, nullspace=rigid_body_modes(V))
+
+
+def linear_solver(A: PETSc.Mat, V, route: str = "direct", *, symmetric: bool = True,
+                  rtol: float = 1e-10) -> PETSc.KSP:
+    """The KSP of ``route`` (:data:`ROUTES`, the resolved ``[solver] linear``) on A."""
+    if route not in ROUTES:
+        raise ValueError(f"linear solver route {route!r}; allowed: {', '.join(ROUTES)}")
+    if route == "direct":
+        return direct_solver(A, symmetric=symmetric)
+    return iterative_solver(A, V, symmetric=symmetric, rtol=rtol)
+
+
+#: Krylov forcing of the iterative route's inexact Newton: a linear solve leaves at most this
+#: fraction of the Newton target rtol * reference, so the last step lands below the target ...
+FORCING = 0.1
+#: ... and, relative to the current residual, at most ETA_EARLY (early steps: a tighter solve
+#: buys nothing while the quadratic term of Newton's error is larger) and never more than ETA_MAX
+ETA_EARLY, ETA_MAX = 1e-6, 0.1
+
+
 class NewtonResult:
     def __init__(self):
         self.residuals: list[float] = []
@@ -30,6 +59,7 @@ class NewtonResult:
         self.converged = False
         self.iterations = 0
         self.timings = {"assemble": 0.0, "factor_solve": 0.0}
+        self.krylov: list[int] = []         # iterative route: Krylov iterations per step
 
 
 #: relative size of a Newton correction below which the iterate is converged to round-off
@@ -38,9 +68,14 @@ STEP_TOL = 1e-12
 
 def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = None,
            rtol: float = 1e-10, max_it: int = 30, reference: float | None = None,
-           symmetric: bool = True, floor: float = 1e-8, extra=None) -> NewtonResult:
+           symmetric: bool = True, floor: float = 1e-8, extra=None,
+           linear: str = "direct") -> NewtonResult:
     """Solve residual(u) - rhs = 0 by Newton's method with a MUMPS LDL^T of the exact Jacobian
-    (LU when ``symmetric`` is False).
+    (LU when ``symmetric`` is False), or with ``linear = "iterative"`` by an inexact Newton
+    method whose steps are GAMG-preconditioned CG (GMRES) solves (:func:`iterative_solver`)
+    converged to eta ||b||, eta = FORCING rtol reference / ||b|| clipped to [ETA_EARLY, ETA_MAX]:
+    a step leaves a linear residual below a tenth of the Newton target, or 1e-6 of the current
+    residual early on, so the iteration stops on the same residual test as the direct route.
 
     ``u`` must satisfy the (homogeneous) Dirichlet conditions on entry; ``rhs`` is a constant
     vector (nodal loads that are not a form). Converged when the residual norm falls below
@@ -59,7 +94,7 @@ def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = 
     F, J = fem.form(residual), fem.form(jacobian)
     A, b = create_matrix(J), create_vector(F)
     du = b.duplicate()
-    ksp = direct_solver(A, symmetric=symmetric)
+    ksp = linear_solver(A, u.function_space, linear, symmetric=symmetric)
     out = NewtonResult()
     for it in range(max_it + 1):
         t0 = time.perf_counter()
@@ -93,7 +128,17 @@ def newton(residual, jacobian, u: fem.Function, bcs, *, rhs: PETSc.Vec | None = 
             extra.jacobian(A)
         out.timings["assemble"] += time.perf_counter() - t0
         t0 = time.perf_counter()
+        if linear == "iterative":
+            eta = FORCING * rtol * reference / norm
+            ksp.setTolerances(rtol=min(ETA_MAX, max(ETA_EARLY, eta)))
+            ksp.getPC().setReusePreconditioner(it > 0)
         ksp.solve(b, du)
+        if linear == "iterative":
+            out.krylov.append(ksp.getIterationNumber())
+            # the clamped rows (1 on the diagonal against stiffness entries ~E h) weigh nothing
+            # in CG's energy norm: their small error would displace the root, so the step is
+            # put back on the clamp exactly, as the factorisation leaves it
+            set_bc(du, bcs)
         out.timings["factor_solve"] += time.perf_counter() - t0
         u.vector.axpy(-1.0, du)
         u.x.scatter_forward()

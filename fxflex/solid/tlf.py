@@ -129,8 +129,9 @@ class TLF(FormulationBase):
     # -- Formulation interface --------------------------------------------------------------------
     def steady_state(self) -> SteadyState:
         if self._steady is None:
-            self._steady = (tlf_steady(self.model) if self.sweep is None
-                            else self.sweep.steady(self))
+            linear = self.options.linear or "direct"
+            self._steady = (tlf_steady(self.model, linear=linear) if self.sweep is None
+                            else self.sweep.steady(self, linear))
         return self._steady
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:

@@ -45,8 +45,10 @@ STAGE_OMEGA = 2 * math.pi * 6000 / 60
 
 
 def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1e-10,
-               max_it: int = 30, start: tuple[float, np.ndarray] | None = None) -> SteadyState:
-    """Rotating-frame TLF equilibrium at speed omega (rad/s; default the scene's). ``start`` =
+               max_it: int = 30, start: tuple[float, np.ndarray] | None = None,
+               linear: str = "direct") -> SteadyState:
+    """Rotating-frame TLF equilibrium at speed omega (rad/s; default the scene's), its Newton
+    steps solved by the ``linear`` route (:func:`fxflex.solid.solvers.newton`). ``start`` =
     (omega0, U0): continue from the owned displacement U0, the equilibrium at omega0 or a
     prediction of it at omega (then omega0 = omega), as the module docstring says."""
     omega = model.scene.rotation.omega if omega is None else omega
@@ -82,15 +84,16 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
         stages = max(1, math.ceil((omega / STAGE_OMEGA) ** 2))
     else:
         stages = max(1, math.ceil(abs(omega**2 - w2_start) / STAGE_OMEGA**2))
-    residuals, iterations, converged = [], 0, True
+    residuals, iterations, converged, krylov = [], 0, True, []
     timings = {"setup": t_setup, "assemble": 0.0, "factor_solve": 0.0}
     for k in range(1, stages + 1):
         w2.value = w2_start + (omega**2 - w2_start) * k / stages
         if absolute:
             w1.value = math.sqrt(w2.value)
         res = newton(R, J, U, [model.bc], rhs=F_ext, rtol=rtol, max_it=max_it,
-                     reference=reference, symmetric=not absolute, extra=extra)
+                     reference=reference, symmetric=not absolute, extra=extra, linear=linear)
         residuals = res.residuals
+        krylov += res.krylov
         iterations += res.iterations
         for key in ("assemble", "factor_solve"):
             timings[key] += res.timings[key]
@@ -100,4 +103,5 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
     tip = model.tip_displacement(U.x.array)
     return SteadyState(tip=tip, q=U.x.array[: model.n_owned].copy(), iterations=iterations,
                        residuals=residuals, converged=converged, timings=timings,
-                       extra={"continuation_stages": stages})
+                       extra={"continuation_stages": stages, "linear": linear,
+                              **({"krylov_iterations": krylov} if krylov else {})})

@@ -78,14 +78,15 @@ class SpeedSweep:
         form.options = self.options
         return form
 
-    def steady(self, form: TLF) -> SteadyState:
-        """The steady state of a member, from the known equilibria (cold when none converges)."""
+    def steady(self, form: TLF, linear: str = "direct") -> SteadyState:
+        """The steady state of a member, from the known equilibria (cold when none converges),
+        its Newton steps solved by the ``linear`` route."""
         omega = form.scene.rotation.omega
         start = predict(self.equilibria, omega)
-        st = tlf_steady(form.model, omega, start=start)
+        st = tlf_steady(form.model, omega, start=start, linear=linear)
         if start is not None and not st.converged:
             self.cold_fallbacks += 1
-            st = tlf_steady(form.model, omega)
+            st = tlf_steady(form.model, omega, linear=linear)
         if st.converged:
             self.equilibria.append((omega, st.q.copy()))
         return st
