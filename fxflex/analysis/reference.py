@@ -195,7 +195,8 @@ def reference_key(scene: Scene) -> str:
     absolute damping model, the damping (the relative model's equilibrium does not depend on c;
     neither depends on meshes, modes, speeds, ramp or integrator). The section keys of SPEC
     section 9 and the tip mass of section 10 count only away from their defaults
-    (:meth:`Scene.stable_dict`)."""
+    (:meth:`Scene.stable_dict`); the contour and stations files by their bytes
+    (:meth:`Scene.file_digests`)."""
     d = scene.stable_dict()
     what = {"geometry": d["geometry"], "material": d["material"],
             "load": {k: d["load"][k] for k in ("line_load", "tip_force")}}
@@ -203,6 +204,9 @@ def reference_key(scene: Scene) -> str:
         what["damping"] = d["damping"]
     if "tip_mass" in d:                         # its centrifugal force moves the equilibrium
         what["tip_mass"] = d["tip_mass"]
+    files = scene.file_digests("geometry")      # the blade is the files' text, not their paths
+    if files:
+        what["files"] = files
     text = json.dumps(what, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 

@@ -33,6 +33,8 @@ LATER_KEYS = ("mesh.solid_degree", "mesh.beam_variant", "geometry.section", "geo
 #: whole tables beyond the paper's scene (SPEC section 10): left out of the hash when every key
 #: is at its default
 LATER_TABLES = ("tip_mass", "solver")
+#: keys that name a file: a hash of the scene covers the file's bytes, not only its path
+FILE_KEYS = ("geometry.contour", "geometry.stations", "mesh.solid_file")
 PAPER_DAMPING = (100.0, 500.0, 1000.0)
 
 
@@ -253,12 +255,34 @@ class Scene:
                 del data[sec][name]
         return data
 
+    def file_digests(self, section: str | None = None) -> dict:
+        """{dotted key: 16 hex digits of the SHA-256 of the file's bytes} for the keys of
+        :data:`FILE_KEYS` that are set (only those of ``section`` if given): what a result
+        computed from the scene depends on beyond the path (an edited stations table is another
+        blade). A file that cannot be read is named "unreadable"."""
+        out = {}
+        for key in FILE_KEYS:
+            sec, name = key.split(".")
+            path = getattr(getattr(self, sec), name)
+            if path and section in (None, sec):
+                try:
+                    with open(path, "rb") as f:
+                        out[key] = hashlib.sha256(f.read()).hexdigest()[:16]
+                except OSError:
+                    out[key] = "unreadable"
+        return out
+
     @property
     def hash(self) -> str:
         """Stable 16-hex-digit hash of the resolved scene (keys sorted, floats as repr) over
         :meth:`stable_dict`, so a scene of sections 1-8 keeps the hash it had before sections
-        9-10 existed (checkpoints resume)."""
+        9-10 existed (checkpoints resume), and over the bytes of the files it names
+        (:meth:`file_digests`), so an edited file does not pass for the one a result was
+        computed from."""
         data = self.stable_dict()
+        digests = self.file_digests()
+        if digests:
+            data["files"] = digests
         text = json.dumps(data, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 

@@ -105,3 +105,19 @@ def test_spinup_profile_is_smooth_and_consistent():
                                            rel=1e-5, abs=1e-3)
     assert d.rate(0.05) == pytest.approx(s.rotation.omega) and d.accel(0.06) == 0.0
     assert d.angle(0.06) == pytest.approx(s.rotation.omega * (0.025 + 0.01))
+
+
+def test_hash_covers_the_bytes_of_named_files(tmp_path):
+    """An edited stations table is another blade: the scene hash and the stored reference's key
+    change with the file's bytes, not only with its path."""
+    from fxflex.analysis.reference import reference_key
+
+    csv = tmp_path / "stations.csv"
+    csv.write_text("x,size_y,size_z,twist_deg\n0,0.08,0.02,0\n1,0.04,0.012,-30\n")
+    before = Scene().replace(**{"geometry.stations": str(csv)})
+    hashes = before.hash, reference_key(before)
+    csv.write_text("x,size_y,size_z,twist_deg\n0,0.08,0.02,0\n1,0.04,0.012,-20\n")
+    after = Scene().replace(**{"geometry.stations": str(csv)})
+    assert after.hash != hashes[0] and reference_key(after) != hashes[1]
+    assert Scene().replace(**{"geometry.stations": str(csv)}).hash == after.hash
+    assert Scene().file_digests() == {} and Scene().hash == "676c6aa68814bf37"
