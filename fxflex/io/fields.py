@@ -14,6 +14,10 @@ Q2 solids (``mesh.solid_degree = 2``): the space is P2 on the 27-node (order-2) 
 dolfinx 0.5's XDMF writes a Lagrange field whose degree equals the geometry's as it is, on the
 ``Hexahedron_27`` topology, so the fields are written at every node (vertices, edge, face and
 cell midpoints) with no interpolation to P1.
+
+Reading back: :func:`read_dataset` loads one dataset of the HDF5 file (the mesh geometry,
+``/Mesh/mesh/geometry``, or a snapshot named in the XDMF) through PETSc's HDF5 viewer, the build's
+own HDF5, so no h5py is needed (dolfinx 0.5's XDMF reader knows no ``Hexahedron_27``).
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from typing import Callable, Sequence
 import numpy as np
 from dolfinx import fem
 
-__all__ = ["Displacement", "FieldWriter"]
+__all__ = ["Displacement", "FieldWriter", "read_dataset"]
 
 #: (t, q) -> (u in o-xyz, U in O-XYZ, *extra fields), this rank's owned entries of the space
 Displacement = Callable[[float, np.ndarray], tuple[np.ndarray, ...]]
@@ -58,3 +62,20 @@ class FieldWriter:
 
     def close(self) -> None:
         self.file.close()
+
+
+def read_dataset(path, dataset: str, width: int = 3) -> np.ndarray:
+    """One dataset of the fields' HDF5 file ``path`` as an (n, width) array, read on this
+    process alone (module docstring)."""
+    from mpi4py import MPI
+    from petsc4py import PETSc
+
+    viewer = PETSc.Viewer().createHDF5(str(path), "r", comm=MPI.COMM_SELF)
+    vec = PETSc.Vec().create(comm=MPI.COMM_SELF)
+    vec.setName(dataset)
+    try:
+        vec.load(viewer)
+        return vec.getArray().reshape(-1, width).copy()
+    finally:
+        vec.destroy()
+        viewer.destroy()

@@ -15,6 +15,7 @@ from mpi4py import MPI
 from scipy.spatial.transform import Rotation
 
 from fxflex.cli import main
+from fxflex.io.fields import read_dataset
 from fxflex.formulation import BuildOptions, build
 from fxflex.io.series import read_series
 from fxflex.scene import load_scene
@@ -33,27 +34,13 @@ def shared_dir(tmp_path) -> pathlib.Path:
     return pathlib.Path(COMM.bcast(str(tmp_path), root=0))
 
 
-def h5_array(path, dataset: str) -> np.ndarray:
-    """One (n, 3) dataset of an HDF5 file through PETSc's HDF5 viewer (no h5py here)."""
-    from petsc4py import PETSc
-
-    viewer = PETSc.Viewer().createHDF5(str(path), "r", comm=SELF)
-    vec = PETSc.Vec().create(comm=SELF)
-    vec.setName(dataset)
-    try:
-        vec.load(viewer)
-        return vec.getArray().reshape(-1, 3).copy()
-    finally:
-        vec.destroy()
-        viewer.destroy()
-
 
 def read_fields(xdmf: pathlib.Path) -> tuple[np.ndarray, dict]:
     """(x, {name: [(t, values), ...]}): the mesh nodes and every snapshot of every field, rows in
     the order of the nodes along X (root first), read from the XML and its HDF5 file."""
     root = ET.parse(xdmf).getroot()
     h5 = xdmf.with_suffix(".h5")
-    x = h5_array(h5, "/Mesh/mesh/geometry")
+    x = read_dataset(h5, "/Mesh/mesh/geometry")
     order = np.argsort(x[:, 0])
     out = {}
     for grid in root.iter("Grid"):
@@ -63,7 +50,7 @@ def read_fields(xdmf: pathlib.Path) -> tuple[np.ndarray, dict]:
         for step in grid.findall("Grid"):
             item = step.find("Attribute/DataItem").text.strip()
             snaps.append((float(step.find("Time").get("Value")),
-                          h5_array(h5, item.split(":", 1)[1])[order]))
+                          read_dataset(h5, item.split(":", 1)[1])[order]))
         out[grid.get("Name")] = snaps
     return x[order], out
 

@@ -21,6 +21,7 @@ from fxflex.analysis.modes import modes_of
 from fxflex.bench.common import child_env
 from fxflex.bench.implicit import compare, reference
 from fxflex.errors import FxflexError
+from fxflex.io.fields import read_dataset
 from fxflex.formulation import PAPER_AB_STEP, BuildOptions, build, dof_count, implicit_step
 from fxflex.memory import _unknowns, estimate
 from fxflex.scene import load_scene
@@ -262,21 +263,6 @@ def cli(*args, cwd):
     return json.loads(r.stdout)
 
 
-def h5_array(path, dataset: str) -> np.ndarray:
-    """One (n, 3) dataset of an HDF5 file through PETSc's HDF5 viewer (the build's HDF5; dolfinx
-    0.5's XDMF reader does not know Hexahedron_27, ParaView does)."""
-    from petsc4py import PETSc
-
-    viewer = PETSc.Viewer().createHDF5(str(path), "r", comm=SELF)
-    vec = PETSc.Vec().create(comm=SELF)
-    vec.setName(dataset)
-    try:
-        vec.load(viewer)
-        return vec.getArray().reshape(-1, 3).copy()
-    finally:
-        vec.destroy()
-        viewer.destroy()
-
 
 @pytest.mark.serial
 def test_q2_fields_are_27_node_hexahedra_carrying_the_tip(tmp_path):
@@ -292,8 +278,8 @@ def test_q2_fields_are_27_node_hexahedra_carrying_the_tip(tmp_path):
     assert text.count('Attribute Name="u"') == 5 == text.count('Attribute Name="U_hub"')
     assert text.count('Dimensions="225 3"') == 1 + 2 * 5       # the geometry, then u, U_hub
     last = text[text.rindex("f.h5:/Function/U_hub/"):].split("<")[0].split(":", 1)[1]
-    x = h5_array(tmp_path / "f.h5", "/Mesh/mesh/geometry")
-    U = h5_array(tmp_path / "f.h5", last)
+    x = read_dataset(tmp_path / "f.h5", "/Mesh/mesh/geometry")
+    U = read_dataset(tmp_path / "f.h5", last)
     assert x.shape == U.shape == (225, 3)
     assert x[:, 0].min() == 0.0 and x[:, 0].max() == pytest.approx(1.0)
     tip = np.flatnonzero(np.isclose(x[:, 0], 1.0) & (np.abs(x[:, 1:]).max(axis=1) < 1e-12))
