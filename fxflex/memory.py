@@ -87,6 +87,13 @@ ITERATIVE = {"ffrf": 600.0, "gcms": 600.0, "tlf": 600.0}
 #: the solid parts grow by this fraction per rank beyond the first (TLF 128 x 16 x 8 on 2 ranks:
 #: 2 x 558 MB at most against 808 MB on one)
 MPI_OVERHEAD = 0.1
+#: the iterative route's solid parts grow by this fraction per rank beyond the first: GAMG's
+#: distributed Galerkin products (MatPtAPSymbolic 49 MB serial, 240 MB on 2 ranks at 58752
+#: unknowns) and the halo copies of the hierarchy. TLF steady on 2 ranks (docs/solvers.md), sum
+#: of the ranks' peaks: 703 MB at 58752 unknowns, 1.64 GB at 187200, 7.93 GB at 1033200, 2.2 to
+#: 2.4 times the serial peak; fitted at 2 ranks with the serial law's margin (measured 0.81-0.86
+#: of the estimate), more ranks extrapolated linearly
+MPI_OVERHEAD_ITERATIVE = 1.5
 
 
 @dataclass(frozen=True)
@@ -145,7 +152,9 @@ def estimate(method: str, scene: Scene, ranks: int = 1, options: BuildOptions | 
         if getattr(options, "mass", None) == "consistent":
             parts["mass factorisation"] = scale * SOLID["ffrf"][1] * n ** (4.0 / 3.0)
     # a distributed factor and mesh carry ghosts and halo copies: measured +10 % at 2 ranks
-    spread = 1.0 + MPI_OVERHEAD * (ranks - 1)
+    # (direct), +150 % (iterative: GAMG's distributed products)
+    overhead = MPI_OVERHEAD if route == "direct" else MPI_OVERHEAD_ITERATIVE
+    spread = 1.0 + overhead * (ranks - 1)
     return Estimate(method, {k: v if k == "base" else spread * v for k, v in parts.items()}, ranks,
                     route)
 
