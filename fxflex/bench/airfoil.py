@@ -347,4 +347,4 @@ def run(scene: Scene, out_dir: str, comm, quick: bool = False) -> dict:
         f"  {r['method']:5s} {r['rpm']:6g} rpm  reference {_mm(r['tip_m'])} mm  order "
         f"{_pct(r['order'], '.2f')}  stable {verdicts[k]}" for k, r in res["references"].items()]
     return {"summary": "\n".join(summary) + f"\n(tables in {out_dir}/airfoil.md)",
-            "info": info, "results": res}
+            "info": info, "results": res, "scene": base}

@@ -68,3 +68,8 @@ def test_files_written(quick):
     data = json.loads((out / "airfoil.json").read_text())
     assert len(data["rows"]) == len(METHODS) * len(airfoil.SPEEDS) * 3
     assert "Diagnosis" in (out / "airfoil.md").read_text()
+    # the blade studied, not the user's rectangle, is the scene of the JSON (the envelope of
+    # `fxflex bench airfoil --json` takes the returned scene) and of the file
+    res, _ = quick
+    assert res["scene"] == airfoil.blade(Scene())
+    assert data["info"]["scene"] == res["scene"].to_dict()
