@@ -40,7 +40,7 @@ EXIT_INPUT, EXIT_FAILURE, EXIT_INTERRUPT = 2, 1, 130
 
 
 BENCHES = ("steady", "tlf", "reduced", "beams", "paper", "accuracy", "stability", "skip",
-           "implicit", "convergence", "tol", "airfoil")
+           "implicit", "convergence", "tol", "airfoil", "pybmodes")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -946,7 +946,7 @@ def _check_modes_paths(args, comm, out_dir: str | None) -> None:
 
 
 #: ``fxflex bench NAME`` modules not named NAME (one per name across the package)
-BENCH_MODULES = {"tlf": "tlf_speed", "convergence": "refinement"}
+BENCH_MODULES = {"tlf": "tlf_speed", "convergence": "refinement", "pybmodes": "peers"}
 
 
 def cmd_bench(args, comm) -> None:
@@ -974,10 +974,28 @@ def cmd_bench(args, comm) -> None:
         raise
     out_dir = os.path.abspath(os.path.join(args.out, args.name))
     check_paths(comm, [Output("--out", out_dir, folder=True)])
+    created = _missing_folders(out_dir)
     _agreed(comm, _makedirs, "--out", out_dir, comm.rank == 0)
-    result = module.run(scene, out_dir, comm, quick=args.quick, **options)
+    try:
+        result = module.run(scene, out_dir, comm, quick=args.quick, **options)
+    except FxflexError:
+        if comm.rank == 0:                # a bench refused before writing: leave nothing
+            for folder in created:
+                if os.listdir(folder):
+                    break
+                os.rmdir(folder)
+        raise
     payload = envelope(result.pop("scene", scene), bench=args.name, out_dir=out_dir, **result)
     _emit(comm, args, payload, result.get("summary", f"bench {args.name}: see {out_dir}"))
+
+
+def _missing_folders(path: str) -> list[str]:
+    """The folders that creating ``path`` makes, deepest first."""
+    out = []
+    while path and not os.path.exists(path):
+        out.append(path)
+        path = os.path.dirname(path)
+    return out
 
 
 def _makedirs(flag: str, path: str, enabled: bool) -> None:

@@ -123,3 +123,14 @@ def test_generalized_alpha_reports_a_physical_divergence(capsys):
     d = json.loads(capsys.readouterr().out)
     assert d["diverged"] is not None and d["diverged"]["cause"] == "physical"
     assert d["rho_inf"] == 0.5 and d["t_s"] < 0.01
+
+
+def test_a_bench_that_refuses_leaves_no_folder(tmp_path, monkeypatch, capsys):
+    """bench pybmodes without pyBModes: one line, exit 2, and the --out folders it had made
+    (two levels, both new) are gone again."""
+    monkeypatch.setitem(sys.modules, "pybmodes", None)          # import pybmodes fails
+    monkeypatch.setitem(sys.modules, "pybmodes.models", None)
+    assert main(["bench", "pybmodes", "--out", str(tmp_path / "a" / "b")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "needs pyBModes" in err[0], err
+    assert list(tmp_path.iterdir()) == []
