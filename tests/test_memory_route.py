@@ -18,9 +18,12 @@ BIG = Scene().replace(**{"mesh.solid": (200, 20, 10)})
 
 
 def _limit_between(monkeypatch, scene, method="tlf"):
-    """FXFLEX_MEMORY_LIMIT halfway between the iterative and the direct estimate."""
-    low = memory.estimate(method, scene, route="iterative").total
-    high = memory.estimate(method, scene, route="direct").total
+    """FXFLEX_MEMORY_LIMIT halfway between the iterative and the direct estimate, for this
+    job's ranks (the check adds up the ranks of one machine, and the routes' per-rank
+    overheads differ)."""
+    ranks = MPI.COMM_WORLD.size
+    low = memory.estimate(method, scene, ranks, route="iterative").total
+    high = memory.estimate(method, scene, ranks, route="direct").total
     assert low < high
     monkeypatch.setenv("FXFLEX_MEMORY_LIMIT", str(int(0.5 * (low + high))))
 
@@ -88,7 +91,7 @@ def test_auto_turns_iterative_when_only_that_fits(method, monkeypatch):
 
 
 def test_auto_refuses_when_neither_fits(monkeypatch):
-    low = memory.estimate("tlf", BIG, route="iterative").total
+    low = memory.estimate("tlf", BIG, MPI.COMM_WORLD.size, route="iterative").total
     monkeypatch.setenv("FXFLEX_MEMORY_LIMIT", str(int(0.9 * low)))
     monkeypatch.delenv("FXFLEX_MEMORY_CHECK", raising=False)
     with pytest.raises(FxflexError, match=r"\(linear solver iterative\) needs about .*allowed: "
