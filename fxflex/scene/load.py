@@ -28,8 +28,6 @@ __all__ = ["load_scene", "parse_override", "scene_from_dict", "validate", "valid
 MAX_TWIST_PER_ELEMENT_DEG = 90.0
 #: methods that carry a [tip_mass] (SPEC section 10); the others refuse one
 TIP_MASS_METHODS = ("lebb", "nebb", "ancf", "ffrf", "gcms", "tlf")
-#: methods that carry the tip mass's translation but not its rotary inertia (fxflex.solid.tip_mass)
-TIP_TRANSLATION_ONLY = ("ffrf", "gcms", "tlf")
 
 
 def scene_from_dict(data: Mapping, base: Scene | None = None) -> Scene:
@@ -92,10 +90,6 @@ def validate_for(method: str, scene: Scene) -> None:
     if scene.tip_mass.present and method not in TIP_MASS_METHODS:
         raise SceneError("tip_mass", f"{method} does not take a tip mass yet; allowed: mass and "
                                      f"inertia 0, or the methods {', '.join(TIP_MASS_METHODS)}")
-    if method in TIP_TRANSLATION_ONLY and any(j > 0.0 for j in scene.tip_mass.inertia):
-        raise SceneError("tip_mass.inertia", f"{method} carries the tip mass's translation but "
-                                             f"not its rotary inertia yet; allowed: inertia "
-                                             f"[0, 0, 0], or lebb, nebb, ancf")
     if scene.mesh.solid_file:
         if method not in ("ffrf", "gcms", "tlf"):
             raise SceneError("mesh.solid_file", f"{method} is a beam method and takes its body "

@@ -75,7 +75,7 @@ class ClampedModes:
 
 def mass_and_stiffness(model: SolidModel) -> tuple[PETSc.Mat, PETSc.Mat]:
     """(K_L, M) assembled with the root clamp: 1 on K_L's clamped diagonal, 0 on M's. M holds
-    the [tip_mass] (:mod:`fxflex.solid.tip_mass`: m (w w^T) (x) I_3 on the tip face), so the
+    the [tip_mass] (:mod:`fxflex.solid.tip_mass`: mu (x) I_3 on the tip nodes), so the
     clamped modes are those of the solid with its tip body."""
     from fxflex.solid.tip_mass import tip_body
 

@@ -15,8 +15,8 @@ from the hub and U* the steady state, a perturbation dU obeys
 - K_T(U*): ``ufl.derivative`` of the St.Venant-Kirchhoff residual (Eq. 33) at the steady state,
   material and geometric (prestress) stiffness; -Omega^2 M_P is the derivative of the centrifugal
   load on the deformed position (spin softening).
-- a [tip_mass] adds m (w w^T) (x) B to each M_B (with the consistent or the lumped mass of the
-  solid: the body stays a point, :mod:`fxflex.solid.tip_mass`).
+- a [tip_mass] adds mu (x) B to each M_B (with the consistent or the lumped mass of the
+  solid: the body stays rigid, :mod:`fxflex.solid.tip_mass`).
 
 The root clamp is eliminated: every matrix is the sub-matrix on the free coordinates, which each
 rank numbers in the order of its owned entries.
@@ -134,7 +134,7 @@ def tlf_matrices(model: SolidModel, U: np.ndarray, omega: float, c_rho: float, a
         K.axpy(1.0, inertia, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         inertia.destroy()
     rows.destroy()
-    if body is not None:                 # m (w w^T) (x) B for each M_B, either mass kind
+    if body is not None:                 # mu (x) B for each M_B, either mass kind
         at = np.full(model.n_owned, -1, dtype=np.int64)
         at[free] = (model.comm.exscan(free.size) or 0) + np.arange(free.size)
         body.add_to(M, rows=at)

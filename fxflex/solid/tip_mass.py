@@ -1,28 +1,41 @@
-"""The [tip_mass] of SPEC section 10 on the solid models (FFRF, GCMS, TLF), through the tip surface.
+"""The [tip_mass] of SPEC section 10 on the solid models (FFRF, GCMS, TLF), through the tip nodes.
 
-The body is a point mass m rigidly attached at the tip section centroid X_c = (R + L, 0, 0). Its
-position is X_c + t(u), t the translation of the least-squares rigid fit of the tip-face nodal
-displacements (:meth:`SolidModel.tip_fit`, the tip layer of :meth:`SolidModel.span_sections`'
-fit; exact for every rigid motion of the face, so also for TLF's large hub rotation). With the
-section centroid at the face nodes' mean (the sections of SPEC sections 1 and 9, meshed
-symmetrically), the translation rows of that fit are t = sum_a w_a u_a with scalar weights w_a
-(sum w_a = 1, sum w_a r_a = 0): T_t = w^T (x) I_3, checked on build. Hence the body's kinetic
-energy 1/2 m |t'|^2 in any frame is the quadratic form of the mass
+The body is rigid, rigidly attached at the tip section centroid X_c = (R + L, 0, 0): mass m and
+second moments Pi = int r r^T dm about X_c (:meth:`fxflex.scene.schema.TipMass.second_moments`,
+J = tr(Pi) I - Pi, the same Pi as the beams' point terms in :mod:`fxflex.beam.frame`). Its mass
+is written as a scalar matrix mu over a few nodes next to the tip, one 3 x 3 identity per node
+pair (isotropic, like the solid's own consistent mass of Eq. 29):
 
-    M_tip = m (w w^T) (x) I_3,
+    M_tip = mu (x) I_3,   mu = m w w^T + G Pi G^T,
 
-which is isotropic node by node like the solid's own consistent mass (Eq. 29): it commutes with
-the nodal 3 x 3 operators B = S, P, G3 and with A_d. So every rotating-frame term that FFRF, GCMS
-and TLF build from the mass follows by adding M_tip where they use M (NOTES.md):
-int rho N^T B N dV gains m (w w^T) (x) B (Coriolis S, spin softening P), the rigid-rotation loads
-int rho N^T B X0 dV gain m w (x) B X_c (centrifugal P, Euler S), J0 gains m X_c^T P X_c, and the
-damping (c/rho) M damps the body as it damps the solid (as for the beams). The row sums of
-M_tip are not used: TLF's lumped mass D keeps the body a point through the Sherman-Morrison-
-Woodbury form of (D + M_tip)^-1 (:meth:`TipBody.woodbury`).
+- w: the translation weights of the tip face's least-squares rigid fit
+  (:meth:`SolidModel.tip_fit`, t = sum_a w_a u_a; sum w_a = 1, sum w_a r_a = 0 with
+  r_a = X_a - X_c, checked on build: the section centroid is the face nodes' mean);
+- G = [g_X, g_Y, g_Z]: gradient rows of affine least-squares fits u ~ a + (grad u) r, so that
+  sum_a g_i,a = 0 and sum_a g_i,a r_a = e_i: g_Y, g_Z over the tip face nodes (the face's own
+  rotation: exact for the torsion and the section's in-plane rotations), g_X over the nodes of
+  the last two node layers (a face has no extent along X; on generated meshes the layer behind
+  the tip, the mid-side layer of Q2).
 
-Rotary inertia (``tip_mass.inertia``) is not carried by the solids yet: the small-rotation rows
-of the fit are not isotropic, so they would not commute with A_d (GCMS's global modes, TLF's hub-
-frame factor, the scalar mass M_s (x) I_3); :func:`fxflex.scene.load.validate_for` refuses it.
+Then for any rigid motion of those nodes, v_a = v_c + omega x r_a' (r_a' = A r_a, any rotation
+A, not only a small one), the kinetic energy 1/2 sum mu_ab v_a . v_b is
+1/2 m |v_c|^2 + 1/2 omega^T (tr(Pi') I - Pi') omega with Pi' = A Pi A^T: the rigid body's,
+exactly. Where the nodes deform, the body follows their affine fit: it differs from the rigid
+fit of the face by the strain rates over the last layer (the axial strain rate enters with
+Pi_XX, a shear with the tip slope), terms of the order of the strain times the body's share.
+
+Being isotropic node by node, M_tip commutes with the nodal 3 x 3 operators B = S, P, G3 and with
+A_d, so every rotating-frame term that FFRF, GCMS and TLF build from the mass follows by adding
+M_tip where they use M (NOTES.md): int rho N^T B N dV gains mu (x) B (Coriolis S, spin softening
+P: with Pi this is the body's propeller moment and gyroscopic coupling), the rigid-rotation loads
+int rho N^T B X0 dV gain (mu (x) B) X0, J0 gains X0^T (mu (x) P) X0 = m X_c^T P X_c + tr(P Pi),
+and the damping (c/rho) M damps the body as it damps the solid (as for the beams). The row sums
+of M_tip are not used: TLF's lumped mass D keeps the body rigid through the Sherman-Morrison-
+Woodbury form of (D + M_tip)^-1 (:meth:`TipBody.woodbury`, a capacitance of at most 4 x 4 per
+direction).
+
+mu has rank at most 4: mu = V C V^T with V = [w, G q_1, G q_2, G q_3] and C = diag(m, pi_i)
+from Pi = sum pi_i q_i q_i^T; columns with a zero coefficient are dropped.
 """
 
 from __future__ import annotations
@@ -40,7 +53,7 @@ if TYPE_CHECKING:
 
     from fxflex.solid.model import SolidModel
 
-__all__ = ["TipBody", "tip_body", "tip_key"]
+__all__ = ["TipBody", "tip_body", "tip_key", "affine_gradients"]
 
 
 def tip_key(scene: Scene) -> dict:
@@ -49,14 +62,23 @@ def tip_key(scene: Scene) -> dict:
     return {"tip_mass": {"mass": tip.mass, "inertia": list(tip.inertia)}} if tip.present else {}
 
 
+def affine_gradients(comm, r: np.ndarray) -> np.ndarray | None:
+    """(n, d): the gradient rows of the equal-weight least-squares affine fit u ~ a + g . r over
+    the owned points r (n, d) of every rank, sum_a G[a] = 0 and sum_a G[a] r_a^T = I_d; None if
+    the points fix no such fit (on every rank alike). Collective."""
+    D = np.hstack([np.ones((len(r), 1)), r])
+    N = comm.allreduce(D.T @ D)
+    ev = np.linalg.eigvalsh(N)
+    if not ev[0] > 1e-9 * ev[-1]:
+        return None
+    return (D @ np.linalg.inv(N))[:, 1:]
+
+
 class TipBody:
-    """The tip point mass on ``model``'s tip face (module docstring). Collective to build."""
+    """The tip body on ``model``'s tip nodes (module docstring). Collective to build."""
 
     def __init__(self, model: SolidModel):
         tip = model.scene.tip_mass
-        if any(j > 0.0 for j in tip.inertia):
-            raise FxflexError("tip_mass.inertia: the solid methods carry the tip mass's "
-                              "translation only; allowed: inertia [0, 0, 0], or lebb, nebb, ancf")
         self.model, self.mass = model, float(tip.mass)
         self.Xc = np.asarray(model.x0_tip, float)
         comm = model.comm
@@ -69,60 +91,114 @@ class TipBody:
             raise FxflexError("tip_mass: the tip section's centroid is not the mean of its face "
                               "nodes, so the rigid fit's translation is not one weight per "
                               "node; allowed: a symmetric section and mesh, or lebb, nebb, ancf")
-        self.nodes = np.flatnonzero(w)                   # owned tip-face nodes
+        columns, coefficients = [w], [self.mass]
+        Pi = tip.second_moments()
+        if np.any(Pi > 0.0):
+            G = self._gradients(model, w)
+            pi, q = np.linalg.eigh(Pi)
+            for k in range(3):
+                if pi[k] > 1e-12 * pi.max():
+                    columns.append(G @ q[:, k])
+                    coefficients.append(float(pi[k]))
+        if self.mass == 0.0:                             # inertia only: no translation column
+            columns, coefficients = columns[1:], coefficients[1:]
+        V = np.column_stack(columns) if columns else np.zeros((w.size, 0))
+        self.nodes = np.flatnonzero(np.any(V != 0.0, axis=1) | (w != 0.0))   # owned body nodes
         self.w = w[self.nodes]
-        self.w_all = np.concatenate(comm.allgather(self.w))
+        self.V = V[self.nodes]                           # (nodes, K)
+        self.C = np.asarray(coefficients, float)         # (K,)
+        self.V_all = np.concatenate(comm.allgather(self.V))
         first = model.V.dofmap.index_map.local_range[0]
         self.global_nodes = first + self.nodes
+        X0 = model.node_coordinates().reshape(-1)
+        self.X0c = self.coordinates(X0)                  # V^T X0: (K, 3)
+
+    @staticmethod
+    def _gradients(model: SolidModel, w: np.ndarray) -> np.ndarray:
+        """[g_X, g_Y, g_Z] (n_owned_nodes, 3): g_Y, g_Z over the tip face (the nodes of w), g_X
+        over the last two node layers (module docstring). Collective."""
+        g = model.scene.geometry
+        comm, tol = model.comm, 1e-6 * g.length
+        xyz = model.node_coordinates()
+        r = xyz - model.x0_tip
+        x = xyz[:, 0] - g.hub_radius
+        stations, _ = model._span_fit
+        face = np.abs(x - g.length) <= tol
+        behind = x >= stations[-2] - tol if stations.size > 1 else np.zeros(x.size, bool)
+        if stations.size < 3 or comm.allreduce(int(np.sum(behind & (x <= tol)))):
+            raise FxflexError("tip_mass.inertia: the last node layers of the solid mesh reach "
+                              "its root, so the tip body's rotation about Y and Z has no layer "
+                              "to act on; allowed: at least 2 element layers (mesh.solid nx), "
+                              "or inertia [0, 0, 0]")
+        G = np.zeros((xyz.shape[0], 3))
+        gx = affine_gradients(comm, r[behind])
+        gyz = affine_gradients(comm, r[face][:, 1:])
+        if gx is None or gyz is None:
+            raise FxflexError("tip_mass.inertia: the nodes at the tip fix no rotation of the "
+                              "tip body; allowed: a tip face and the layer behind it that span "
+                              "a volume, or inertia [0, 0, 0]")
+        G[behind, 0] = gx[:, 0]
+        G[face, 1:] = gyz
+        return G
 
     # -- vectors on the owned entries -------------------------------------------------------------
+    def coordinates(self, X: np.ndarray) -> np.ndarray:
+        """V^T X: (K, 3) or (K, 3, k) for owned-entry arrays X (n_owned,) or (n_owned, k), on
+        every rank (row of the translation column: t = sum_a w_a u_a)."""
+        part = X.reshape((-1, 3) + X.shape[1:])[self.nodes]
+        return self.model.comm.allreduce(np.tensordot(self.V, part, axes=(0, 0)))
+
     def translation(self, X: np.ndarray) -> np.ndarray:
         """t = sum_a w_a u_a (3,) or (3, k) of owned-entry arrays (n_owned,) or (n_owned, k),
         on every rank."""
         part = X.reshape((-1, 3) + X.shape[1:])[self.nodes]
         return self.model.comm.allreduce(np.tensordot(self.w, part, axes=(0, 0)))
 
-    def nodal(self, vector3: np.ndarray) -> np.ndarray:
-        """m w (x) v: the owned entries (n_owned,) of the body's force m v spread with w."""
+    def spread(self, F: np.ndarray) -> np.ndarray:
+        """V F: the owned entries (n_owned,) of the nodal forces for F (K, 3) per column."""
         out = np.zeros(self.model.n_owned)
-        out.reshape(-1, 3)[self.nodes] = self.mass * self.w[:, None] * np.asarray(vector3)
+        out.reshape(-1, 3)[self.nodes] = self.V @ F
         return out
 
     def load(self, B: np.ndarray) -> np.ndarray:
-        """m w (x) B X_c: the body's share of int rho N^T B X0 dV (B = P: centrifugal per unit
+        """(mu (x) B) X0: the body's share of int rho N^T B X0 dV (B = P: centrifugal per unit
         phi'^2; B = S: Euler per unit phi'')."""
-        return self.nodal(B @ self.Xc)
+        return self.spread(self.C[:, None] * (self.X0c @ B.T))
 
     def second_moment(self, B: np.ndarray) -> float:
-        """m X_c^T B X_c: the body's share of int rho X0^T B X0 dV (B = P: J0)."""
-        return self.mass * float(self.Xc @ B @ self.Xc)
+        """X0^T (mu (x) B) X0 = m X_c^T B X_c + tr(B Pi): the body's share of
+        int rho X0^T B X0 dV (B = P: J0)."""
+        return float(np.einsum("k,ki,ij,kj->", self.C, self.X0c, B, self.X0c))
 
     def apply(self, x: np.ndarray, out: np.ndarray) -> None:
-        """out += M_tip x = m w (x) t(x) on the owned entries. Collective."""
-        out.reshape(-1, 3)[self.nodes] += self.mass * self.w[:, None] * self.translation(x)
+        """out += M_tip x on the owned entries. Collective."""
+        out.reshape(-1, 3)[self.nodes] += self.V @ (self.C[:, None] * self.coordinates(x))
 
     def diagonal(self, d: np.ndarray) -> None:
         """Prepare :meth:`woodbury` for the lumped (diagonal) mass D, owned entries d > 0."""
-        self._dw = self.w[:, None] / d.reshape(-1, 3)[self.nodes]          # D^-1 W, (k, 3)
-        self._cap = 1.0 / self.mass + self.model.comm.allreduce(
-            np.sum(self.w[:, None] * self._dw, axis=0))                    # 1/m + W^T D^-1 W
+        dv = d.reshape(-1, 3)[self.nodes]                                 # (nodes, 3)
+        self._dw = self.V[:, :, None] / dv[:, None, :]                    # D_j^-1 V: (nodes, K, 3)
+        cap = self.model.comm.allreduce(np.einsum("ak,alj->jkl", self.V, self._dw))
+        cap += np.diag(1.0 / self.C)[None]                                # C^-1 + V^T D_j^-1 V
+        self._cap_inv = np.linalg.inv(cap)                                # (3, K, K)
 
     def woodbury(self, out: np.ndarray) -> None:
-        """out = D^-1 r on entry, (D + M_tip)^-1 r on exit (Sherman-Morrison-Woodbury: M_tip =
-        m W W^T, W = w (x) I_3, so the capacitance 1/m I + W^T D^-1 W is diagonal, one
-        3-vector reduced per call). TLF's central differences keep a diagonal solve with the
-        body a point (spreading it over the face as row sums would give it the face's rotary
-        inertia m <y^2 + z^2>). Collective."""
-        c = self.translation(out) / self._cap
-        out.reshape(-1, 3)[self.nodes] -= self._dw * c
+        """out = D^-1 r on entry, (D + M_tip)^-1 r on exit (Sherman-Morrison-Woodbury with
+        M_tip = (V C V^T) (x) I_3: per direction j a K x K capacitance C^-1 + V^T D_j^-1 V, one
+        (K, 3) reduction per call). TLF's central differences keep a diagonal solve with the
+        body rigid (row sums would smear it over the nodes and change its inertia).
+        Collective."""
+        y = self.coordinates(out)                                         # (K, 3)
+        z = np.einsum("jkl,lj->kj", self._cap_inv, y)
+        out.reshape(-1, 3)[self.nodes] -= np.einsum("akj,kj->aj", self._dw, z)
 
     # -- matrices ----------------------------------------------------------------------------------
     def add_to(self, A: PETSc.Mat, B: np.ndarray | None = None, scale: float = 1.0, *,
                rows: np.ndarray | None = None, block: int = 3) -> None:
-        """A += scale m (w w^T) (x) B (B = I_3 by default; ``block`` 1: the scalar m w w^T) and
-        assemble A. ``rows``: the global row of each owned entry of the model (n_owned,), for a
-        matrix on another layout (TLF's free coordinates); default the model's own numbering.
-        Collective (every rank adds its owned rows, new nonzeros allowed)."""
+        """A += scale mu (x) B (B = I_3 by default; ``block`` 1: the scalar mu) and assemble A.
+        ``rows``: the global row of each owned entry of the model (n_owned,), for a matrix on
+        another layout (TLF's free coordinates); default the model's own numbering. Collective
+        (every rank adds its owned rows, new nonzeros allowed)."""
         from petsc4py import PETSc
 
         B = np.eye(block) if B is None else np.asarray(B, float)
@@ -132,7 +208,7 @@ class TipBody:
         else:
             idx = rows[(3 * self.nodes[:, None] + np.arange(3)).reshape(-1)]
         cols = np.concatenate(self.model.comm.allgather(idx)).astype(PETSc.IntType)
-        values = scale * self.mass * np.kron(np.outer(self.w, self.w_all), B)
+        values = scale * np.kron((self.V * self.C) @ self.V_all.T, B)
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         if idx.size:
             A.setValues(idx.astype(PETSc.IntType), cols, values,
@@ -145,16 +221,15 @@ def tip_body(model: SolidModel) -> TipBody | None:
     return TipBody(model) if model.scene.tip_mass.present else None
 
 
-
 class SteadyTerms:
     """The body's share of TLF's rotating-frame equilibrium (:mod:`fxflex.solid.tlf_steady`),
     for :func:`fxflex.solid.solvers.newton`: the centrifugal load on its deformed position and,
     with the absolute damping model, its circulatory term,
 
-        r_tip(U) = -Omega^2 m w (x) P (X_c + t(U)) [+ (c/rho) Omega m w (x) S t(U)],
+        r_tip(U) = -Omega^2 (mu (x) P) (X0 + U) [+ (c/rho) Omega (mu (x) S) U],
 
-    and their derivative -Omega^2 m (w w^T) (x) P [+ (c/rho) Omega m (w w^T) (x) S]. ``w2`` and
-    ``w1`` hold Omega^2 and Omega (``.value``, the continuation's current stage)."""
+    and their derivative -Omega^2 mu (x) P [+ (c/rho) Omega mu (x) S]. ``w2`` and ``w1`` hold
+    Omega^2 and Omega (``.value``, the continuation's current stage)."""
 
     def __init__(self, body: TipBody, w2, w1=None, c_rho: float = 0.0):
         from fxflex.scene.kinematics import P3, S3
@@ -166,11 +241,11 @@ class SteadyTerms:
         return float(self.w1.value) * self.c_rho if self.w1 is not None else 0.0
 
     def residual(self, u, b) -> None:
-        n = self.body.model.n_owned
-        t = self.body.translation(u.x.array[:n])
-        force = -float(self.w2.value) * self.P @ (self.body.Xc + t) + self._circulatory() * (
-            self.S @ t)
-        b.getArray()[:n] += self.body.nodal(force)
+        body = self.body
+        t = body.coordinates(u.x.array[: body.model.n_owned])            # V^T U: (K, 3)
+        force = -float(self.w2.value) * (body.X0c + t) @ self.P.T + self._circulatory() * (
+            t @ self.S.T)
+        b.getArray()[: body.model.n_owned] += body.spread(body.C[:, None] * force)
 
     def jacobian(self, A) -> None:
         self.body.add_to(A, -float(self.w2.value) * self.P + self._circulatory() * self.S)

@@ -75,7 +75,7 @@ class Dynamics:
             # M = M_s (x) I_3: factorise the scalar mass once (1/9 of the entries) and solve the
             # three components with it
             self.M = scalar_mass(model)
-            if body is not None:                  # m w w^T: the body moves with the fit's t
+            if body is not None:                  # the scalar mu: the body moves with the tip nodes
                 body.add_to(self.M, block=1)
             self.ksp = direct_solver(self.M)
             self.ksp.setUp()                               # factorise once, here

@@ -83,7 +83,7 @@ class HubTangent(HubFrameFactor):
         self.A.zeroEntries()
         assemble_matrix(self.A, self.form, bcs=self.bcs, diagonal=1.0)
         self.A.assemble()
-        if d.body is not None:                   # the tip body's m (w w^T) (x) I_3
+        if d.body is not None:                   # the tip body's mu (x) I_3
             d.body.add_to(self.A, scale=mass)
         if d.mass == "lumped":
             arr = self.diag.getArray()
