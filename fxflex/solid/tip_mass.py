@@ -1,41 +1,49 @@
-"""The [tip_mass] of SPEC section 10 on the solid models (FFRF, GCMS, TLF), through the tip nodes.
+"""The [tip_mass] of SPEC section 10 on the solid models (FFRF, GCMS, TLF), through the tip face.
 
 The body is rigid, rigidly attached at the tip section centroid X_c = (R + L, 0, 0): mass m and
 second moments Pi = int r r^T dm about X_c (:meth:`fxflex.scene.schema.TipMass.second_moments`,
 J = tr(Pi) I - Pi, the same Pi as the beams' point terms in :mod:`fxflex.beam.frame`). Its mass
-is written as a scalar matrix mu over a few nodes next to the tip, one 3 x 3 identity per node
-pair (isotropic, like the solid's own consistent mass of Eq. 29):
+is written as a scalar matrix mu over the tip face nodes, one 3 x 3 identity per node pair
+(isotropic, like the solid's own consistent mass of Eq. 29):
 
-    M_tip = mu (x) I_3,   mu = m w w^T + G Pi G^T,
+    M_tip = mu (x) I_3,   mu = m w w^T + Pi_YY g_Y g_Y^T + Pi_ZZ g_Z g_Z^T,
 
 - w: the translation weights of the tip face's least-squares rigid fit
   (:meth:`SolidModel.tip_fit`, t = sum_a w_a u_a; sum w_a = 1, sum w_a r_a = 0 with
   r_a = X_a - X_c, checked on build: the section centroid is the face nodes' mean);
-- G = [g_X, g_Y, g_Z]: gradient rows of affine least-squares fits u ~ a + (grad u) r, so that
-  sum_a g_i,a = 0 and sum_a g_i,a r_a = e_i: g_Y, g_Z over the tip face nodes (the face's own
-  rotation: exact for the torsion and the section's in-plane rotations), g_X over the nodes of
-  the last two node layers (a face has no extent along X; on generated meshes the layer behind
-  the tip, the mid-side layer of Q2).
+- G = [g_Y, g_Z]: gradient rows of the affine least-squares fit u ~ a + (grad u) r over the tip
+  face nodes, so that sum_a g_i,a = 0 and sum_a g_i,a r_a = e_i (the face's own rotation).
 
-Then for any rigid motion of those nodes, v_a = v_c + omega x r_a' (r_a' = A r_a, any rotation
-A, not only a small one), the kinetic energy 1/2 sum mu_ab v_a . v_b is
+The face has no extent along X, so Pi is carried only in the tip section plane: the solids take
+a body flat in that plane, Pi_XX = 0, i.e. J_X = J_Y + J_Z (a thin disc [2 J, J, J], a rod along
+Y or Z; :func:`fxflex.scene.load.tip_body_is_flat`); :func:`fxflex.scene.load.validate_for`
+refuses any other with one line. (A gradient along X needs nodes behind the face; over the last
+node layer its weights grow as 1 / h, and the body's Pi_XX then loads that layer's axial and
+shear strain rates with an inertia Pi_XX / h^2: local modes whose frequencies fall as the mesh
+is refined, measured from 189 to 73 Hz between 40 and 320 layers. A scalar mass per node pair
+cannot tell a rotation from a strain there.)
+
+Then for any rigid motion of the face, v_a = v_c + omega x r_a' (r_a' = A r_a, any rotation A,
+not only a small one), the kinetic energy 1/2 sum mu_ab v_a . v_b is
 1/2 m |v_c|^2 + 1/2 omega^T (tr(Pi') I - Pi') omega with Pi' = A Pi A^T: the rigid body's,
-exactly. Where the nodes deform, the body follows their affine fit: it differs from the rigid
-fit of the face by the strain rates over the last layer (the axial strain rate enters with
-Pi_XX, a shear with the tip slope), terms of the order of the strain times the body's share.
+exactly. Where the face deforms, the body follows its affine fit, which sees the face's in-plane
+strain rates besides its rotation (terms of the order of the section's in-plane strain: a rod
+along Y, [P, 0, P], and a disc [P, P/2, P/2] give torsion frequencies 0.35 % apart at rest on a
+uniform 0.12 x 0.06 m solid with P = rho I_p L, docs/beams.md).
 
 Being isotropic node by node, M_tip commutes with the nodal 3 x 3 operators B = S, P, G3 and with
 A_d, so every rotating-frame term that FFRF, GCMS and TLF build from the mass follows by adding
 M_tip where they use M (NOTES.md): int rho N^T B N dV gains mu (x) B (Coriolis S, spin softening
-P: with Pi this is the body's propeller moment and gyroscopic coupling), the rigid-rotation loads
+P: with Pi, the body's gyroscopic coupling and linear centrifugal terms; TLF's prestress adds the
+second-order ones, docs/beams.md), the rigid-rotation loads
 int rho N^T B X0 dV gain (mu (x) B) X0, J0 gains X0^T (mu (x) P) X0 = m X_c^T P X_c + tr(P Pi),
 and the damping (c/rho) M damps the body as it damps the solid (as for the beams). The row sums
 of M_tip are not used: TLF's lumped mass D keeps the body rigid through the Sherman-Morrison-
-Woodbury form of (D + M_tip)^-1 (:meth:`TipBody.woodbury`, a capacitance of at most 4 x 4 per
+Woodbury form of (D + M_tip)^-1 (:meth:`TipBody.woodbury`, a capacitance of at most 3 x 3 per
 direction).
 
-mu has rank at most 4: mu = V C V^T with V = [w, G q_1, G q_2, G q_3] and C = diag(m, pi_i)
-from Pi = sum pi_i q_i q_i^T; columns with a zero coefficient are dropped.
+mu has rank at most 3: mu = V C V^T with V = [w, g_Y, g_Z] and C = diag(m, Pi_YY, Pi_ZZ) (Pi
+is diagonal, SPEC section 10); columns with a zero coefficient are dropped.
 """
 
 from __future__ import annotations
@@ -47,6 +55,7 @@ from mpi4py import MPI
 
 from fxflex.errors import FxflexError
 from fxflex.scene import Scene
+from fxflex.scene.load import tip_body_is_flat
 
 if TYPE_CHECKING:
     from petsc4py import PETSc
@@ -92,14 +101,16 @@ class TipBody:
                               "nodes, so the rigid fit's translation is not one weight per "
                               "node; allowed: a symmetric section and mesh, or lebb, nebb, ancf")
         columns, coefficients = [w], [self.mass]
-        Pi = tip.second_moments()
-        if np.any(Pi > 0.0):
-            G = self._gradients(model, w)
-            pi, q = np.linalg.eigh(Pi)
-            for k in range(3):
-                if pi[k] > 1e-12 * pi.max():
-                    columns.append(G @ q[:, k])
-                    coefficients.append(float(pi[k]))
+        Pi = np.diag(tip.second_moments())
+        if not tip_body_is_flat(tip.inertia):           # refused by validate_for before this
+            raise FxflexError("tip_mass.inertia: the solids carry a tip body flat in the tip "
+                              "section plane; allowed: J_X = J_Y + J_Z, or lebb, nebb, ancf")
+        if np.any(Pi[1:] > 0.0):
+            G = self._face_gradients(model, w)
+            for k in (1, 2):
+                if Pi[k] > 0.0:
+                    columns.append(G[:, k - 1])
+                    coefficients.append(float(Pi[k]))
         if self.mass == 0.0:                             # inertia only: no translation column
             columns, coefficients = columns[1:], coefficients[1:]
         V = np.column_stack(columns) if columns else np.zeros((w.size, 0))
@@ -114,31 +125,17 @@ class TipBody:
         self.X0c = self.coordinates(X0)                  # V^T X0: (K, 3)
 
     @staticmethod
-    def _gradients(model: SolidModel, w: np.ndarray) -> np.ndarray:
-        """[g_X, g_Y, g_Z] (n_owned_nodes, 3): g_Y, g_Z over the tip face (the nodes of w), g_X
-        over the last two node layers (module docstring). Collective."""
-        g = model.scene.geometry
-        comm, tol = model.comm, 1e-6 * g.length
-        xyz = model.node_coordinates()
-        r = xyz - model.x0_tip
-        x = xyz[:, 0] - g.hub_radius
-        stations, _ = model._span_fit
-        face = np.abs(x - g.length) <= tol
-        behind = x >= stations[-2] - tol if stations.size > 1 else np.zeros(x.size, bool)
-        if stations.size < 3 or comm.allreduce(int(np.sum(behind & (x <= tol)))):
-            raise FxflexError("tip_mass.inertia: the last node layers of the solid mesh reach "
-                              "its root, so the tip body's rotation about Y and Z has no layer "
-                              "to act on; allowed: at least 2 element layers (mesh.solid nx), "
-                              "or inertia [0, 0, 0]")
-        G = np.zeros((xyz.shape[0], 3))
-        gx = affine_gradients(comm, r[behind])
-        gyz = affine_gradients(comm, r[face][:, 1:])
-        if gx is None or gyz is None:
-            raise FxflexError("tip_mass.inertia: the nodes at the tip fix no rotation of the "
-                              "tip body; allowed: a tip face and the layer behind it that span "
-                              "a volume, or inertia [0, 0, 0]")
-        G[behind, 0] = gx[:, 0]
-        G[face, 1:] = gyz
+    def _face_gradients(model: SolidModel, w: np.ndarray) -> np.ndarray:
+        """[g_Y, g_Z] (n_owned_nodes, 2) over the tip face (the nodes of w; module docstring).
+        Collective."""
+        face = w != 0.0
+        r = model.node_coordinates()[face] - model.x0_tip
+        g = affine_gradients(model.comm, r[:, 1:])
+        if g is None:
+            raise FxflexError("tip_mass.inertia: the tip face's nodes fix no rotation of the "
+                              "tip body; allowed: inertia [0, 0, 0]")
+        G = np.zeros((w.size, 2))
+        G[face] = g
         return G
 
     # -- vectors on the owned entries -------------------------------------------------------------
