@@ -97,7 +97,9 @@ def make_iterative(ksp: PETSc.KSP, *, symmetric: bool = True, rtol: float = 1e-1
     of the absolute damping), right-preconditioned. Both stop on the true residual,
     ||b - A x|| <= rtol ||b||, so that ``rtol`` means what a direct solve's round-off would.
     ``nullspace`` (:func:`rigid_body_modes`) is set as the operator's near-nullspace, the coarse
-    spaces of smoothed aggregation for elasticity. A solve that does not converge raises."""
+    spaces of smoothed aggregation for elasticity; the KSP must have its operator already (a
+    SLEPc spectral transformation's gets it only at set-up: set the near-nullspace on the matrix
+    instead). A solve that does not converge raises."""
     if symmetric:
         ksp.setType("cg")
         ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
@@ -119,6 +121,10 @@ def make_iterative(ksp: PETSc.KSP, *, symmetric: bool = True, rtol: float = 1e-1
         opts.delValue(key)
     if nullspace is not None:
         A, _ = ksp.getOperators()
+        if A.getType() is None:
+            raise ValueError("make_iterative: the KSP has no operator yet to carry the "
+                             "near-nullspace (an eigensolver's, before set-up); set it on the "
+                             "matrix itself")
         A.setNearNullSpace(nullspace)
     return ksp
 

@@ -148,8 +148,9 @@ def _solve(model: SolidModel, count: int, K, M, tol: float, linear: str) -> Clam
     st.setType(SLEPc.ST.Type.SINVERT)
     st.setShift(0.0)
     if linear == "iterative":
-        make_iterative(st.getKSP(), rtol=inner_rtol(tol),
-                       nullspace=rigid_body_modes(model.V))
+        # on K itself: SLEPc hands its KSP the operator only at set-up (at shift 0, K)
+        K.setNearNullSpace(rigid_body_modes(model.V))
+        make_iterative(st.getKSP(), rtol=inner_rtol(tol))
     else:
         make_direct(st.getKSP())
     eps.setTolerances(tol, 500)

@@ -220,3 +220,17 @@ def test_cli_verdict_without_factorisation(command, route, folder, monkeypatch, 
         assert len(out["frequencies_hz"]) == out["n"] > 0
     assert (len(made) == 0) == (route == "iterative"), made
 
+
+def test_near_nullspace_needs_the_operator():
+    """A SLEPc spectral transformation's KSP gets its operator only at set-up: a near-nullspace
+    given to it before would sit on a placeholder matrix that GAMG never sees (the clamped
+    modes' iterative route lost its rigid-body modes so), so make_iterative refuses it."""
+    from petsc4py import PETSc
+
+    from fxflex.numerics.petsc import make_iterative, rigid_body_modes
+
+    model = SolidModel(_scene(), MPI.COMM_WORLD)
+    ksp = PETSc.KSP().create(model.comm)
+    with pytest.raises(ValueError, match="no operator"):
+        make_iterative(ksp, nullspace=rigid_body_modes(model.V))
+    ksp.destroy()
