@@ -9,11 +9,11 @@ with K_L the linear stiffness (Eq. 14) and M = M_ff the consistent mass (Eq. 11)
 generalised Hermitian problem by shift-and-invert about 0 (MUMPS Cholesky of K_L), distributed over
 the model's communicator; on the iterative route (``[solver] linear``, docs/solvers.md) each
 inverse is a CG solve with GAMG and the rigid-body near-nullspace, converged to a tenth of the
-eigen tolerance (:func:`fxflex.numerics.petsc.inner_rtol`), so that the inexact inverse leaves the eigenpairs' residuals at tol. The
-clamped rows carry 1 on the diagonal of K_L and 0 on that of M: their eigenvalues are infinite
-and never reach the target (the iterative route's modes are set to zero there exactly, as the
-factorisation's are). Each mode is scaled to x^T M x = 1 and its sign fixed so that the largest
-tip-centre component is positive (deterministic across ranks).
+eigen tolerance (:func:`fxflex.numerics.petsc.inner_rtol`), so that the inexact inverse leaves
+the eigenpairs' residuals at tol. The clamped rows carry 1 on the diagonal of K_L and 0 on that
+of M: their eigenvalues are infinite and never reach the target (the iterative route's modes are
+set to zero there exactly, as the factorisation's are). Each mode is scaled to x^T M x = 1 and its
+sign fixed so that the largest tip-centre component is positive (deterministic across ranks).
 
 Everything the eigenmodes depend on is the scene's geometry, material and mesh, so they are
 cached on disk (:mod:`fxflex.cache`, kind ``modes``) keyed by the mesh key, the material, the

@@ -13,8 +13,9 @@ root (y its left eigenvector, from the dense matrices); both routes solve the sa
 their roots differ by at most the sum of these radii (twice, for the second-order term), y^H r
 taken as computed plus the bound on its round-off (Higham's gamma_k, tests/solid/conftest.py).
 (||y|| ||r|| instead would be 1e4 times looser: the residual's large entries sit where the low
-modes' left vectors are small.) Under ``mpirun -n 2`` the iterative route runs distributed and is compared with
-the direct route on one process, each rank gathering the whole field in the node order of the
+modes' left vectors are small.) Under ``mpirun -n 2`` the iterative route runs distributed and
+is compared with the direct route on one process (the PEP: both routes distributed, every rank
+gathering the matrices and vectors), each rank gathering the whole field in the node order of the
 serial mesh (matched by coordinates), so that every rank asserts the same.
 """
 
