@@ -89,7 +89,7 @@ ITERATIVE = {"ffrf": 600.0, "gcms": 600.0, "tlf": 600.0}
 #: the PEP's K (assembled whole, then its free block), C and M, GAMG's hierarchy of K and SLEPc's
 #: TOAR basis (about 54 vectors). Measured peaks of the serial steady state and verdict
 #: (docs/solvers.md): 423 MB at 58752 unknowns, 1020 MB at 187200, 1.69 and 1.64 kB per unknown
-#: above the steady state alone (346 and 713 MB in the same runs); the estimate lies 13 and 10 %
+#: above the steady state alone (323 and 713 MB in the same runs); the estimate lies 13 and 10 %
 #: above them. The direct route's factorisation part already counts the verdict's factor
 PEP_ITERATIVE = 1.6e3
 #: the solid parts grow by this fraction per rank beyond the first (TLF 128 x 16 x 8 on 2 ranks:
