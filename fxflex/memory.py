@@ -28,7 +28,8 @@ that names the estimate, what is available and the largest size that fits.
 The solids' linear systems go one of two routes (``[solver] linear``, docs/solvers.md): direct
 (MUMPS, the ``factorisation`` part above) or iterative (GAMG-preconditioned Krylov, whose
 ``preconditioner`` part -- the coarse operators, prolongators and smoother and Krylov vectors --
-grows as n, not n^(4/3)). With "auto" :func:`check` takes the direct route whenever it fits,
+grows as n, not n^(4/3); TLF adds its ``stability eigensolve``, the verdict's PEP with its own
+hierarchy, also as n). With "auto" :func:`check` takes the direct route whenever it fits,
 which is what every build did before the key existed, and else the iterative one; it refuses
 only when neither fits.
 """
@@ -84,6 +85,13 @@ Q2_FACTOR = 1.3
 #: raised by 12 % like the others, less the mesh and matrices part. FFRF and GCMS (one
 #: hierarchy inside SLEPc's shift-and-invert) are given TLF's figure, not measured
 ITERATIVE = {"ffrf": 600.0, "gcms": 600.0, "tlf": 600.0}
+#: TLF's stability verdict on the iterative route (per unknown), beyond the steady state's peak:
+#: the PEP's K (assembled whole, then its free block), C and M, GAMG's hierarchy of K and SLEPc's
+#: TOAR basis (about 54 vectors). Measured peaks of the serial steady state and verdict
+#: (docs/solvers.md): 423 MB at 58752 unknowns, 1020 MB at 187200, 1.69 and 1.64 kB per unknown
+#: above the steady state alone (323 and 713 MB in the same runs); the estimate lies 13 and 10 %
+#: above them. The direct route's factorisation part already counts the verdict's factor
+PEP_ITERATIVE = 1.6e3
 #: the solid parts grow by this fraction per rank beyond the first (TLF 128 x 16 x 8 on 2 ranks:
 #: 2 x 558 MB at most against 808 MB on one)
 MPI_OVERHEAD = 0.1
@@ -151,6 +159,8 @@ def estimate(method: str, scene: Scene, ranks: int = 1, options: BuildOptions | 
             parts["invariants"] = INVARIANTS * n     # Q2 refuses the route (tlf_invariants)
         if getattr(options, "mass", None) == "consistent":
             parts["mass factorisation"] = scale * SOLID["ffrf"][1] * n ** (4.0 / 3.0)
+        if route == "iterative":
+            parts["stability eigensolve"] = scale * PEP_ITERATIVE * n
     # a distributed factor and mesh carry ghosts and halo copies: measured +10 % at 2 ranks
     # (direct), +150 % (iterative: GAMG's distributed products)
     overhead = MPI_OVERHEAD if route == "direct" else MPI_OVERHEAD_ITERATIVE

@@ -10,9 +10,12 @@ from fxflex.errors import FxflexError, SceneError
 from fxflex.formulation import BuildOptions
 from fxflex.scene import Scene
 
-#: measured peak resident memory (MB) of a serial TLF steady state on the iterative route
-#: (docs/solvers.md): the estimate must lie at or above each, and not far above
-MEASURED = {(128, 16, 8): 323, (192, 24, 12): 707, (400, 40, 20): 3305}
+#: measured peak resident memory (MB) of a serial TLF steady state and stability verdict on the
+#: iterative route (docs/solvers.md), what the estimate is for: it must lie at or above each,
+#: and not far above
+MEASURED = {(128, 16, 8): 423, (192, 24, 12): 1020}
+#: ... of the steady state alone (the verdict not measured there): the estimate must cover it
+STEADY_ONLY = {(400, 40, 20): 3305}
 #: a mesh whose MUMPS factor dominates its estimate (about 1.4e5 unknowns)
 BIG = Scene().replace(**{"mesh.solid": (200, 20, 10)})
 
@@ -49,24 +52,33 @@ def test_the_iterative_estimate_grows_slower_than_the_factor(method):
     assert ratio("iterative") < ratio("direct")
 
 
-@pytest.mark.parametrize("size", sorted(MEASURED))
+@pytest.mark.parametrize("size", sorted({**MEASURED, **STEADY_ONLY}))
 def test_the_iterative_estimate_bounds_the_measured_peak(size):
     est = memory.estimate("tlf", Scene().replace(**{"mesh.solid": size}),
                           route="iterative").total / 1e6
-    assert MEASURED[size] <= est <= 1.5 * MEASURED[size], (size, est)
+    peak = MEASURED.get(size, STEADY_ONLY.get(size))
+    assert peak <= est, (size, est)
+    if size in MEASURED:
+        assert est <= 1.5 * peak, (size, est)
 
 
-#: measured peaks (MB, the sum over both ranks) of the same runs under mpirun -n 2
-MEASURED_2 = {(128, 16, 8): 352 + 351, (192, 24, 12): 820 + 816, (400, 40, 20): 3920 + 4010}
+#: measured peaks (MB, the sum over both ranks) of the same runs under mpirun -n 2: steady state
+#: and verdict ...
+MEASURED_2 = {(128, 16, 8): 380 + 383}
+#: ... and the steady state alone
+STEADY_ONLY_2 = {(192, 24, 12): 820 + 816, (400, 40, 20): 3920 + 4010}
 
 
-@pytest.mark.parametrize("size", sorted(MEASURED_2))
+@pytest.mark.parametrize("size", sorted({**MEASURED_2, **STEADY_ONLY_2}))
 def test_the_iterative_estimate_bounds_the_measured_peak_on_two_ranks(size):
     """GAMG's distributed products cost 2.2-2.4 times the serial peak on two ranks, far more
     than the direct route's +10 %: the estimate for two ranks covers the measured sum."""
     est = memory.estimate("tlf", Scene().replace(**{"mesh.solid": size}), 2,
                           route="iterative").total / 1e6
-    assert MEASURED_2[size] <= est <= 1.5 * MEASURED_2[size], (size, est)
+    peak = MEASURED_2.get(size, STEADY_ONLY_2.get(size))
+    assert peak <= est, (size, est)
+    if size in MEASURED_2:
+        assert est <= 1.5 * peak, (size, est)
 
 
 def test_auto_is_direct_when_it_fits():

@@ -3,7 +3,8 @@
 (lambda^2 M + lambda C + K) x = 0 by SLEPc's PEP solver (TOAR, the Krylov method on the companion
 linearisation that never forms it) with shift-and-invert about a target sigma: each Krylov step
 solves with P(sigma) = K + sigma C + sigma^2 M, factorised once by MUMPS (LU: K carries the
-non-symmetric circulatory term of the absolute damping model). Around sigma = 0 the roots nearest
+non-symmetric circulatory term of the absolute damping model), or on the iterative route
+(docs/solvers.md) by a GAMG-preconditioned Krylov solve. Around sigma = 0 the roots nearest
 in magnitude are the lowest modes, the ones a rotating beam loses stability through (divergence,
 where a root passes through 0, or flutter of the low modes). Collective on the matrices'
 communicator; the vectors come back as this rank's entries.
@@ -17,7 +18,7 @@ from slepc4py import SLEPc
 
 from fxflex.numerics.qep import EigenNotConverged
 
-__all__ = ["pep_eigen", "make_direct", "make_iterative", "rigid_body_modes", "ROUTES",
+__all__ = ["pep_eigen", "make_direct", "make_iterative", "rigid_body_modes", "inner_rtol", "ROUTES",
            "PetscLinearisation", "TOL", "MAX_IT"]
 
 #: relative residual the PEP converges each root to, by default
@@ -40,19 +41,39 @@ def make_direct(ksp: PETSc.KSP, *, symmetric: bool = True) -> PETSc.KSP:
 ROUTES = ("direct", "iterative")
 #: Krylov iterations before an iterative solve gives up (GAMG on these meshes: tens)
 KRYLOV_MAX_IT = 2000
+#: an eigensolver's shift-and-invert on the iterative route solves to this fraction of the eigen
+#: tolerance, so that the inexact inverse leaves the eigenpairs' residuals at the tolerance ...
+INNER_FACTOR = 0.1
+#: ... but no tighter than this: the true residual of a Krylov solve in double precision stalls
+#: near kappa * eps ||x|| / ||b||, above 1e-14 on these meshes
+INNER_MIN = 1e-13
 
 
-def rigid_body_modes(V) -> PETSc.NullSpace:
+def inner_rtol(tol: float) -> float:
+    """The relative residual an iterative shift-and-invert solve is converged to for eigenpairs
+    converged to ``tol`` (INNER_FACTOR, INNER_MIN)."""
+    return max(INNER_MIN, INNER_FACTOR * tol)
+
+
+def rigid_body_modes(V, entries: np.ndarray | None = None) -> PETSc.NullSpace:
     """The six rigid-body motions of the solid on the nodes of the vector space ``V`` (three
     translations e_i and three rotations e_i x X about the origin, on the undeformed dof
     coordinates X), orthonormalised by modified Gram-Schmidt: the near-nullspace GAMG builds
-    its coarse spaces from (dolfinx 0.5 has no helper). Collective on V's communicator."""
+    its coarse spaces from (dolfinx 0.5 has no helper). ``entries``: this rank's owned entries
+    to keep, in order (the free coordinates of a clamped body, whose matrices are numbered
+    rank by rank in that order); default all. Collective on V's communicator."""
     from dolfinx import la
 
     imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
     owned = imap.size_local
     X = V.tabulate_dof_coordinates()[:owned]
-    vecs = [la.create_petsc_vector(imap, bs) for _ in range(6)]
+    comm = V.mesh.comm
+    if entries is None:
+        keep = slice(None)
+        vecs = [la.create_petsc_vector(imap, bs) for _ in range(6)]
+    else:
+        keep, n = entries, entries.size
+        vecs = [PETSc.Vec().createMPI((n, comm.allreduce(n)), comm=comm) for _ in range(6)]
     for i in range(6):
         block = np.zeros((owned, 3))
         if i < 3:
@@ -61,12 +82,12 @@ def rigid_body_modes(V) -> PETSc.NullSpace:
             e = np.zeros(3)
             e[i - 3] = 1.0
             block[:] = np.cross(e, X)
-        vecs[i].setArray(block.reshape(-1))
+        vecs[i].setArray(block.reshape(-1)[keep])
     for i, v in enumerate(vecs):
         for w in vecs[:i]:
             v.axpy(-v.dot(w), w)
         v.normalize()
-    return PETSc.NullSpace().create(vectors=vecs, comm=V.mesh.comm)
+    return PETSc.NullSpace().create(vectors=vecs, comm=comm)
 
 
 def make_iterative(ksp: PETSc.KSP, *, symmetric: bool = True, rtol: float = 1e-10,
@@ -76,7 +97,9 @@ def make_iterative(ksp: PETSc.KSP, *, symmetric: bool = True, rtol: float = 1e-1
     of the absolute damping), right-preconditioned. Both stop on the true residual,
     ||b - A x|| <= rtol ||b||, so that ``rtol`` means what a direct solve's round-off would.
     ``nullspace`` (:func:`rigid_body_modes`) is set as the operator's near-nullspace, the coarse
-    spaces of smoothed aggregation for elasticity. A solve that does not converge raises."""
+    spaces of smoothed aggregation for elasticity; the KSP must have its operator already (a
+    SLEPc spectral transformation's gets it only at set-up: set the near-nullspace on the matrix
+    instead). A solve that does not converge raises."""
     if symmetric:
         ksp.setType("cg")
         ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
@@ -98,13 +121,18 @@ def make_iterative(ksp: PETSc.KSP, *, symmetric: bool = True, rtol: float = 1e-1
         opts.delValue(key)
     if nullspace is not None:
         A, _ = ksp.getOperators()
+        if A.getType() is None:
+            raise ValueError("make_iterative: the KSP has no operator yet to carry the "
+                             "near-nullspace (an eigensolver's, before set-up); set it on the "
+                             "matrix itself")
         A.setNearNullSpace(nullspace)
     return ksp
 
 
 def pep_eigen(M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, pairs: int, *, target: float = 0.0,
               tol: float | None = None, vectors: bool = True, symmetric: bool = False,
-              initial: np.ndarray | None = None, errors: bool = True
+              initial: np.ndarray | None = None, errors: bool = True,
+              linear: str = "direct", nullspace: PETSc.NullSpace | None = None
               ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """The ``pairs`` roots nearest ``target`` with Im >= 0 (one per conjugate pair), as
     (lambda (k,), X (n_local, k) complex or None, backward errors (k,)), unsorted.
@@ -118,7 +146,21 @@ def pep_eigen(M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, pairs: int, *, target: f
     factorises it as LDL^T, half the entries of LU. ``initial`` (n_local, m) real: the Krylov
     search starts from these vectors (SLEPc's initial space), e.g. the mode vectors of a nearby
     speed; the roots it converges are the same, to ``tol``. Without ``errors`` the backward
-    errors are not computed (None)."""
+    errors are not computed (None).
+
+    ``linear`` (:data:`ROUTES`): "direct" factorises P(target) with MUMPS; "iterative" applies
+    its inverse by a GAMG-preconditioned Krylov solve (:func:`make_iterative`; CG when
+    ``symmetric``, else GMRES) converged to :func:`inner_rtol` of the PEP tolerance, the
+    ``nullspace`` (:func:`rigid_body_modes` on the matrices' layout) as GAMG's near-nullspace.
+    That route needs ``target`` 0, where SLEPc's shift-and-invert operator is K itself, which
+    carries the near-nullspace (set on a KSP before SLEPc gives it its operator, it would be
+    lost). A symmetric K that is not positive definite (past a divergence, where the iterative
+    steady state's CG steps fail first) stops CG with an error."""
+    if linear not in ROUTES:
+        raise ValueError(f"linear solver route {linear!r}; allowed: {', '.join(ROUTES)}")
+    if linear == "iterative" and target != 0.0:
+        raise ValueError("the iterative route of the PEP needs target 0 (its operator is K)")
+    tol = TOL if tol is None else tol
     pep = SLEPc.PEP().create(K.getComm())
     pep.setOperators([K, C, M])
     pep.setProblemType(SLEPc.PEP.ProblemType.GENERAL)
@@ -131,8 +173,13 @@ def pep_eigen(M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, pairs: int, *, target: f
     pep.setWhichEigenpairs(SLEPc.PEP.Which.TARGET_MAGNITUDE)
     st = pep.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
-    make_direct(st.getKSP(), symmetric=symmetric)
-    pep.setTolerances(TOL if tol is None else tol, MAX_IT)
+    if linear == "iterative":
+        if nullspace is not None:
+            K.setNearNullSpace(nullspace)
+        make_iterative(st.getKSP(), symmetric=symmetric, rtol=inner_rtol(tol))
+    else:
+        make_direct(st.getKSP(), symmetric=symmetric)
+    pep.setTolerances(tol, MAX_IT)
     space = []
     if initial is not None and initial.shape[1]:
         for col in initial.T:
@@ -177,14 +224,16 @@ class PetscLinearisation:
 
     With ``reassemble`` (a callable giving (M, C, K) afresh) the matrices are freed after each
     eigensolve, as a distributed model's memory asks, and assembled again only for a later solve
-    that wants more roots. ``symmetric`` and ``initial`` are passed to :func:`pep_eigen`
-    (a symmetric K; a starting space, e.g. a nearby speed's modes)."""
+    that wants more roots. ``symmetric``, ``initial`` and ``linear`` are passed to
+    :func:`pep_eigen` (a symmetric K; a starting space, e.g. a nearby speed's modes; the linear
+    solver route of its shift-and-invert); ``nullspace``, a callable, gives the iterative
+    route's near-nullspace on the matrices' layout."""
 
     kind = "petsc"
 
     def __init__(self, M: PETSc.Mat, C: PETSc.Mat, K: PETSc.Mat, *, min_pairs: int = 8,
                  rtol: float = 1e-8, reassemble=None, symmetric: bool = False,
-                 initial: np.ndarray | None = None):
+                 initial: np.ndarray | None = None, linear: str = "direct", nullspace=None):
         self.M, self.C, self.K = M, C, K
         self._reassemble = reassemble
         self.dof = K.getSize()[0]
@@ -192,6 +241,7 @@ class PetscLinearisation:
         self.rtol = rtol                # a root grows when Re > rtol max|lambda| (PEP residual)
         self.note: str | None = None
         self.symmetric, self.initial = symmetric, initial
+        self.linear, self._nullspace = linear, nullspace
         self._modes: tuple[np.ndarray, np.ndarray | None, int] | None = None
 
     def modes(self, pairs: int) -> tuple[np.ndarray, np.ndarray]:
@@ -206,9 +256,13 @@ class PetscLinearisation:
             count = min(max(pairs, self.min_pairs), self.dof)
             if self.K is None:
                 self.M, self.C, self.K = self._reassemble()
+            iterative = {}
+            if self.linear != "direct":
+                iterative = {"linear": self.linear, "nullspace": (
+                    self._nullspace() if self._nullspace is not None else None)}
             try:
                 lam, X, _ = pep_eigen(self.M, self.C, self.K, count, symmetric=self.symmetric,
-                                      initial=self.initial, errors=False)
+                                      initial=self.initial, errors=False, **iterative)
             except EigenNotConverged as exc:
                 lam, X = exc.eigenvalues, exc.vectors
             finally:

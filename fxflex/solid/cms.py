@@ -8,12 +8,12 @@ component modes are the lowest eigenpairs of
 with K_L the linear stiffness (Eq. 14) and M = M_ff the consistent mass (Eq. 11). SLEPc solves the
 generalised Hermitian problem by shift-and-invert about 0 (MUMPS Cholesky of K_L), distributed over
 the model's communicator; on the iterative route (``[solver] linear``, docs/solvers.md) each
-inverse is a CG solve with GAMG and the rigid-body near-nullspace, converged to INNER_FACTOR of
-the eigen tolerance, so that the inexact inverse leaves the eigenpairs' residuals at tol. The
-clamped rows carry 1 on the diagonal of K_L and 0 on that of M: their eigenvalues are infinite
-and never reach the target (the iterative route's modes are set to zero there exactly, as the
-factorisation's are). Each mode is scaled to x^T M x = 1 and its sign fixed so that the largest
-tip-centre component is positive (deterministic across ranks).
+inverse is a CG solve with GAMG and the rigid-body near-nullspace, converged to a tenth of the
+eigen tolerance (:func:`fxflex.numerics.petsc.inner_rtol`), so that the inexact inverse leaves
+the eigenpairs' residuals at tol. The clamped rows carry 1 on the diagonal of K_L and 0 on that
+of M: their eigenvalues are infinite and never reach the target (the iterative route's modes are
+set to zero there exactly, as the factorisation's are). Each mode is scaled to x^T M x = 1 and its
+sign fixed so that the largest tip-centre component is positive (deterministic across ranks).
 
 Everything the eigenmodes depend on is the scene's geometry, material and mesh, so they are
 cached on disk (:mod:`fxflex.cache`, kind ``modes``) keyed by the mesh key, the material, the
@@ -101,13 +101,6 @@ def modes_key(model: SolidModel, count: int, tol: float) -> str:
         "code": cache.code_version(*CODE_MODULES)})
 
 
-#: the iterative route's inner CG tolerance, relative to the eigen tolerance (module docstring)
-INNER_FACTOR = 0.1
-#: ... but no tighter than this: the true residual of a CG solve in double precision stalls
-#: near kappa * eps ||x|| / ||b||, above 1e-14 on these meshes
-INNER_MIN = 1e-13
-
-
 def clamped_modes(model: SolidModel, count: int, *, K: PETSc.Mat | None = None,
                   M: PETSc.Mat | None = None, tol: float = 1e-12,
                   use_cache: bool = True, linear: str = "direct") -> ClampedModes:
@@ -138,7 +131,7 @@ def _solve(model: SolidModel, count: int, K, M, tol: float, linear: str) -> Clam
 
     from dolfinx.fem.petsc import set_bc
 
-    from fxflex.numerics.petsc import make_iterative, rigid_body_modes
+    from fxflex.numerics.petsc import inner_rtol, make_iterative, rigid_body_modes
     from fxflex.solid.solvers import make_direct
 
     t0 = time.perf_counter()
@@ -155,8 +148,9 @@ def _solve(model: SolidModel, count: int, K, M, tol: float, linear: str) -> Clam
     st.setType(SLEPc.ST.Type.SINVERT)
     st.setShift(0.0)
     if linear == "iterative":
-        make_iterative(st.getKSP(), rtol=max(INNER_MIN, INNER_FACTOR * tol),
-                       nullspace=rigid_body_modes(model.V))
+        # on K itself: SLEPc hands its KSP the operator only at set-up (at shift 0, K)
+        K.setNearNullSpace(rigid_body_modes(model.V))
+        make_iterative(st.getKSP(), rtol=inner_rtol(tol))
     else:
         make_direct(st.getKSP())
     eps.setTolerances(tol, 500)

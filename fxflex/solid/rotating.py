@@ -31,13 +31,13 @@ import ufl
 from dolfinx import fem
 from petsc4py import PETSc
 
-from fxflex.numerics.petsc import PetscLinearisation
+from fxflex.numerics.petsc import PetscLinearisation, rigid_body_modes
 from fxflex.scene.kinematics import P3, S3
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel
 from fxflex.solid.tip_mass import tip_body
 
-__all__ = ["Linearisation", "tlf_linearisation", "tlf_matrices", "free_entries"]
+__all__ = ["Linearisation", "tlf_linearisation", "tlf_matrices", "free_entries", "k_symmetric"]
 
 
 class Linearisation(PetscLinearisation):
@@ -81,11 +81,23 @@ def tlf_linearisation(model: SolidModel, U: np.ndarray, omega: float, c_rho: flo
                       absolute: bool, mass: str, **analysis) -> Linearisation:
     """The linearisation of the module docstring about the owned steady displacement U (O-XYZ) at
     speed omega (rad/s), with the ``consistent`` or ``lumped`` mass; its matrices live only for
-    an eigensolve and are assembled again if a later one asks for more roots. Collective on
-    ``model.comm``."""
+    an eigensolve and are assembled again if a later one asks for more roots. With
+    ``linear="iterative"`` among ``analysis`` the PEP's shift-and-invert is a GAMG-preconditioned
+    Krylov solve whose near-nullspace is the rigid-body modes on the free coordinates.
+    Collective on ``model.comm``."""
     args = (model, U, omega, c_rho, absolute, mass)
-    return Linearisation(*tlf_matrices(*args), free_entries(model), model.n_owned,
+    free = free_entries(model)
+    if analysis.get("linear", "direct") == "iterative":
+        analysis["nullspace"] = functools.partial(rigid_body_modes, model.V, free)
+    return Linearisation(*tlf_matrices(*args), free, model.n_owned,
                          reassemble=functools.partial(tlf_matrices, *args), **analysis)
+
+
+def k_symmetric(scene) -> bool:
+    """The linearisation's K is symmetric: no circulatory term (c/rho) Omega M_S, which only the
+    absolute damping model with damping and speed has."""
+    return not (scene.damping.model == "absolute" and scene.damping.c > 0.0
+                and scene.rotation.omega > 0.0)
 
 
 def tlf_matrices(model: SolidModel, U: np.ndarray, omega: float, c_rho: float, absolute: bool,

@@ -300,13 +300,17 @@ class TLF(FormulationBase):
         """(M, C, K) of the motion about the rotating equilibrium as PETSc matrices on the free
         coordinates, with the mass in use (:mod:`fxflex.solid.rotating`), analysed by SLEPc's
         PEP: the STABILITY_PAIRS lowest roots decide the verdict, a root growing when its real
-        part exceeds PEP_STABILITY_RTOL of the largest modulus. Collective."""
-        from fxflex.solid.rotating import tlf_linearisation
+        part exceeds PEP_STABILITY_RTOL of the largest modulus. Its shift-and-invert takes the
+        build's linear solver route (``options.linear``, docs/solvers.md): a MUMPS factor of K,
+        or CG (GMRES when K is not symmetric) with GAMG. Collective."""
+        from fxflex.solid.rotating import k_symmetric, tlf_linearisation
 
         st = steady or self.steady_state()
         sc = self.scene
         absolute = sc.damping.model == "absolute"
         start = {} if self.sweep is None else self.sweep.eigen_start(self, absolute)
+        if self.options.linear == "iterative":
+            start = {"symmetric": k_symmetric(sc), **start, "linear": "iterative"}
         return tlf_linearisation(self.model, st.q, sc.rotation.omega,
                                  sc.damping.c / sc.material.rho, absolute,
                                  self.mass_kind, min_pairs=STABILITY_PAIRS,

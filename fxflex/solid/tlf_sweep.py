@@ -93,8 +93,10 @@ class SpeedSweep:
 
     def eigen_start(self, form: TLF, absolute: bool) -> dict:
         """The PEP's ``symmetric`` and ``initial`` for a member (module docstring)."""
+        from fxflex.solid.rotating import k_symmetric
+
         omega = form.scene.rotation.omega
-        symmetric = not (absolute and form.scene.damping.c > 0.0 and omega > 0.0)
+        symmetric = k_symmetric(form.scene)
         initial = None
         if self.modes:
             _, X = min(self.modes, key=lambda e: abs(e[0] ** 2 - omega**2))

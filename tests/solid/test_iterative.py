@@ -7,8 +7,15 @@ stable steady state), u_i - u_d = J^-1 (R(u_i) - R(u_d)) to first order, hence
 own residual, not one machine's digits (a factor 2 covers the second-order term, which is of the
 size of the squared difference). Clamped modes: each eigenvalue of either route lies within its
 certified radius of an exact one (tests/solid/conftest.py), so two of them differ by at most the
-sum of the radii. Under ``mpirun -n 2`` the iterative route runs distributed and is compared with
-the direct route on one process, each rank gathering the whole field in the node order of the
+sum of the radii. TLF's stability PEP (lambda^2 M + lambda C + K) x = 0: to first order a computed
+pair (lambda, x) with residual r = P(lambda) x lies at -y^H r / y^H P'(lambda) x from an exact
+root (y its left eigenvector, from the dense matrices); both routes solve the same matrices, so
+their roots differ by at most the sum of these radii (twice, for the second-order term), y^H r
+taken as computed plus the bound on its round-off (Higham's gamma_k, tests/solid/conftest.py).
+(||y|| ||r|| instead would be 1e4 times looser: the residual's large entries sit where the low
+modes' left vectors are small.) Under ``mpirun -n 2`` the iterative route runs distributed and
+is compared with the direct route on one process (the PEP: both routes distributed, every rank
+gathering the matrices and vectors), each rank gathering the whole field in the node order of the
 serial mesh (matched by coordinates), so that every rank asserts the same.
 """
 
@@ -21,8 +28,12 @@ from mpi4py import MPI
 
 from fxflex.scene import Scene
 from fxflex.solid import forms
+from fxflex.formulation import BuildOptions
+from fxflex.numerics.petsc import TOL
 from fxflex.solid.cms import clamped_modes
 from fxflex.solid.model import SolidModel
+from fxflex.solid.rotating import tlf_matrices
+from fxflex.solid.tlf import PEP_STABILITY_RTOL, STABILITY_PAIRS, TLF
 from fxflex.solid.tlf_steady import tlf_steady
 
 MESH = (16, 2, 2)
@@ -101,3 +112,126 @@ def test_clamped_modes_iterative_equal_direct(eig):
     assert np.all(gap <= r_d + r_i), (gap, r_d + r_i)
     # the radii are tight: far below the spacing of the modes
     assert np.all(r_d + r_i < 1e-6 * direct.omega2)
+
+
+def _pep_radius(M, C, K, lam, x, y, gamma):
+    """(|y^H r| + |y|^T (r's round-off)) / |y^H P'(lambda) x|, r = P(lambda) x: how far the pair
+    (lambda, x) lies from the root whose left eigenvector is y, to first order (module
+    docstring)."""
+    k = max(np.count_nonzero(A, axis=1).max() for A in (M, C, K)) + 2
+    r = lam**2 * (M @ x) + lam * (C @ x) + K @ x
+    slack = gamma(k) * (np.abs(K) @ np.abs(x) + abs(lam) * (np.abs(C) @ np.abs(x))
+                        + abs(lam) ** 2 * (np.abs(M) @ np.abs(x)))
+    return ((abs(np.vdot(y, r)) + np.abs(y) @ slack)
+            / abs(np.vdot(y, (2.0 * lam * M + C) @ x)))
+
+
+def _left_vector(M, C, K, lam):
+    """The left eigenvector of the root nearest ``lam``: inverse iteration on P(lambda)^H."""
+    PH = (lam**2 * M + lam * C + K).conj().T
+    y = np.random.default_rng(0).standard_normal(K.shape[0]) + 0j
+    for _ in range(3):
+        y = np.linalg.solve(PH, y)
+        y /= np.linalg.norm(y)
+    return y
+
+
+@pytest.mark.parametrize("rpm, damping", [(1000.0, "relative"), (5000.0, "relative"),
+                                          (5000.0, "absolute")])
+def test_tlf_stability_pep_iterative_equals_direct(rpm, damping, eig, gathered_dense):
+    """The verdict's PEP about one steady state, its shift-and-invert by MUMPS and by GAMG + CG
+    (GMRES for the absolute damping's non-symmetric K): the same roots within the radii each
+    route's residuals certify, the same verdict."""
+    scene = _scene(**{"rotation.rpm": rpm, "damping.model": damping})
+    comm = MPI.COMM_WORLD
+    model = SolidModel(scene, comm)
+    st = tlf_steady(model, linear="direct")
+    assert st.converged
+    roots, vectors, verdicts = {}, {}, {}
+    for route in ("direct", "iterative"):
+        form = TLF(scene, comm, BuildOptions(linear=route), model=model)
+        lin = form.linearise(st)
+        assert lin.linear == route
+        lam, X = lin.modes(STABILITY_PAIRS)
+        verdicts[route] = lin.stable()
+        roots[route] = lam
+        vectors[route] = np.vstack(comm.allgather(X))
+    args = (model, st.q, scene.rotation.omega, scene.damping.c / scene.material.rho,
+            scene.damping.model == "absolute", form.mass_kind)
+    M, C, K = (gathered_dense(A, comm) for A in tlf_matrices(*args))
+    radii = {route: [] for route in roots}
+    for j, lam_d in enumerate(roots["direct"]):
+        y = _left_vector(M, C, K, lam_d)
+        for route in roots:
+            radii[route].append(_pep_radius(M, C, K, roots[route][j], vectors[route][:, j], y,
+                                            eig.gamma))
+    r_d, r_i = np.array(radii["direct"]), np.array(radii["iterative"])
+    lam_d, lam_i = roots["direct"], roots["iterative"]
+    bound = 2.0 * (r_d + r_i)
+    gap = np.abs(lam_i - lam_d)
+    assert np.all(gap <= bound), (gap, bound)
+    # the bound resolves the frequencies to 1e-6 and the growth rates (damping: Re lambda about
+    # -c / (2 rho)) to 1 %, and no root within it of the direct one could cross the verdict's
+    # threshold (a root grows when Re lambda > PEP_STABILITY_RTOL max |lambda|)
+    assert np.all(bound < 1e-6 * np.abs(lam_d)), (bound, lam_d)
+    assert np.all(bound < 1e-2 * np.abs(lam_d.real)), (bound, lam_d.real)
+    assert np.all(lam_d.real + bound < PEP_STABILITY_RTOL * np.abs(lam_d).max())
+    # the inexact inverse leaves the eigenpairs' residuals at the PEP's tolerance: normwise
+    # backward errors (||K|| + |lambda| ||C|| + |lambda|^2 ||M||) within TOL, as the direct ones
+    norms = [np.linalg.norm(A, 2) for A in (K, C, M)]
+    for lam, X in ((lam_d, vectors["direct"]), (lam_i, vectors["iterative"])):
+        for mu, x in zip(lam, X.T):
+            r = mu**2 * (M @ x) + mu * (C @ x) + K @ x
+            scale = (norms[0] + abs(mu) * norms[1] + abs(mu) ** 2 * norms[2]) * np.linalg.norm(x)
+            assert np.linalg.norm(r) <= TOL * scale, (np.linalg.norm(r) / scale, mu)
+    assert verdicts["direct"] is True and verdicts["iterative"] is True
+
+
+@pytest.mark.serial     # the CLI prints on rank 0 only
+@pytest.mark.parametrize("command", ["steady", "modes"])
+@pytest.mark.parametrize("route", ["direct", "iterative"])
+def test_cli_verdict_without_factorisation(command, route, folder, monkeypatch, capsys):
+    """``fxflex steady`` (``modes``) ``--method tlf --set solver.linear=iterative`` reports the
+    verdict (and the modes), and no MUMPS factor is made on the way: every one goes through
+    ``make_direct``, spied on here wherever it is imported. The direct route, which factorises,
+    shows that the spy sees them."""
+    import json
+
+    import fxflex.numerics.petsc
+    import fxflex.solid.solvers
+    import fxflex.solid.tlf_frequency
+    from fxflex.cli import main
+
+    made = []
+    for module in (fxflex.numerics.petsc, fxflex.solid.solvers, fxflex.solid.tlf_frequency):
+        real = module.make_direct
+
+        def spy(ksp, *args, real=real, **kwargs):
+            made.append(ksp)
+            return real(ksp, *args, **kwargs)
+
+        monkeypatch.setattr(module, "make_direct", spy)
+    assert main([command, "--method", "tlf", "--set", f"mesh.solid={list(MESH)}", "--set",
+                 f"solver.linear={route}", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["stable"] is True
+    if command == "steady":
+        assert out["converged"] and out["linear"] == route
+    else:
+        assert len(out["frequencies_hz"]) == out["n"] > 0
+    assert (len(made) == 0) == (route == "iterative"), made
+
+
+def test_near_nullspace_needs_the_operator():
+    """A SLEPc spectral transformation's KSP gets its operator only at set-up: a near-nullspace
+    given to it before would sit on a placeholder matrix that GAMG never sees (the clamped
+    modes' iterative route lost its rigid-body modes so), so make_iterative refuses it."""
+    from petsc4py import PETSc
+
+    from fxflex.numerics.petsc import make_iterative, rigid_body_modes
+
+    model = SolidModel(_scene(), MPI.COMM_WORLD)
+    ksp = PETSc.KSP().create(model.comm)
+    with pytest.raises(ValueError, match="no operator"):
+        make_iterative(ksp, nullspace=rigid_body_modes(model.V))
+    ksp.destroy()
