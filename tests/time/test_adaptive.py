@@ -1,6 +1,6 @@
 """Adaptive generalised-alpha (``fxflex run --tol``, fxflex/time/adaptive.py): the tip history of a
 10 ms transient at 1000 rpm within EPS of its peak against a fine fixed-step run, fewer steps for a
-larger EPS, FFRF and GCMS on a small Q2 mesh, a tiny TLF mesh once and on two ranks against one,
+larger EPS, FFRF and GCMS on a small Q2 mesh, a tiny TLF mesh once and on two ranks,
 resume from a checkpoint, the explicit rule and bad input."""
 
 import json
@@ -109,23 +109,23 @@ def test_reduced_solids_within_eps(method):
 
 
 @pytest.mark.mpi
-def test_two_ranks_take_the_serial_steps():
-    """TLF (Q1 4x2x2, 2 ms, EPS 1e-3) distributed over the ranks and whole on one process, as
-    tests/solid/test_tlf_mpi.py does for fixed steps: the same accepted and rejected steps, and
-    the same tip history to the Newton tolerance (1e-5 of each step's increment,
-    fxflex.time.generalized_alpha; the test of resume uses the same 1e-5 of the peak)."""
-    runs = []
-    for comm in (MPI.COMM_WORLD, MPI.COMM_SELF):
-        form = build("tlf", load_scene(overrides=["mesh.solid=[4,2,2]"]), comm,
-                     BuildOptions(need_steady=False))
-        runs.append(_adaptive(form, 1e-3, t_end=0.002))
-    world, alone = runs
-    assert world.diverged is None and alone.diverged is None
-    assert (world.steps, world.adaptive["rejected"]) == (alone.steps, alone.adaptive["rejected"])
-    a, b = np.array(world.history), np.array(alone.history)
-    assert a.shape == b.shape and np.array_equal(a[:, 0], b[:, 0])
-    peak = np.max(np.linalg.norm(b[:, 1:4], axis=1))
-    assert np.max(np.linalg.norm(a[:, 1:4] - b[:, 1:4], axis=1)) < 1e-5 * peak
+def test_two_ranks_within_eps():
+    """TLF (Q1 4x2x2, 2 ms, EPS 1e-3) distributed over the ranks: the history within EPS of the
+    fixed-step run on one process (COMM_SELF, as tests/solid/test_tlf_mpi.py compares), less the
+    reference's own error, bounded by its change from 2 us to 1 us (about 3 times that error at
+    generalized-alpha's h^2; measured 1.4e-4, the history 5.0e-4 from it). Not "the serial run's
+    steps": the distributed solve's round-off (1e-8 of the tip) can tip a step's accept/reject
+    decision, after which the two runs take different steps, each within EPS (over 10 ms,
+    docs/tolerance.md: 6059 / 1195 accepted / rejected on 2 ranks against 5991 / 1123, the
+    histories 1.6e-5 of the peak apart, 6.3e-4 and 6.4e-4 from the fine run)."""
+    eps, t_end, mesh = 1e-3, 0.002, "mesh.solid=[4,2,2]"
+    alone = build("tlf", load_scene(overrides=[mesh]), MPI.COMM_SELF,
+                  BuildOptions(need_steady=False))
+    fine = _reference(alone, 1e-6, t_end)
+    ref_err = _error(_reference(alone, 2e-6, t_end), fine)
+    res = _adaptive(_form("tlf", mesh), eps, t_end)
+    assert res.diverged is None and res.t == t_end
+    assert _error(res.history, fine) + ref_err < eps
 
 
 def test_explicit_rule():
