@@ -113,10 +113,9 @@ class TipBody:
                     coefficients.append(float(Pi[k]))
         if self.mass == 0.0:                             # inertia only: no translation column
             columns, coefficients = columns[1:], coefficients[1:]
-        V = np.column_stack(columns) if columns else np.zeros((w.size, 0))
-        self.nodes = np.flatnonzero(np.any(V != 0.0, axis=1) | (w != 0.0))   # owned body nodes
+        self.nodes = np.flatnonzero(w)                   # owned tip-face nodes (all columns)
         self.w = w[self.nodes]
-        self.V = V[self.nodes]                           # (nodes, K)
+        self.V = np.column_stack(columns)[self.nodes]    # (nodes, K); K >= 1 when present
         self.C = np.asarray(coefficients, float)         # (K,)
         self.V_all = np.concatenate(comm.allgather(self.V))
         first = model.V.dofmap.index_map.local_range[0]
