@@ -13,10 +13,14 @@ Refinement ladder per method (:func:`ladder`), cheap first, only through existin
   the default "paper" -- a scene that names "paper" explicitly is the default and is refined
   locking-free too), elements 4, 8, ... (NEBB) and 5, 10, ... (ANCF);
 - TLF, FFRF, GCMS: ``mesh.solid_degree = 2`` (27-node hexahedra) on ``mesh.solid`` =
-  8x2x2, 16x2x2, 32x4x2, 48x6x4, 64x8x4, 96x12x6 (Y and Z divisions stay even, SPEC 8); FFRF and
-  GCMS then raise the mode count (``reduction.ffrf_modes`` / ``gcms_modes``, doubled) on the mesh
-  reached until its change is below EPS/3, the mesh having been refined to 2 EPS/3, so that the
-  sum of both estimates stays below EPS.
+  8x2x2, 16x2x2, 32x4x2, 48x6x4, 64x8x4, 96x12x6 (Y and Z divisions stay even, SPEC 8). FFRF and
+  GCMS solve every mesh at 2 n modes (``reduction.ffrf_modes`` / ``gcms_modes``, n the scene's)
+  and take the result at n from the first n of the same clamped modes (one eigensolve and one
+  more projection, :meth:`Refiner.truncated`): the mode-count difference |f_n - f_2n| bounds
+  the truncation error of f_n, and so of the 2 n result returned, on that mesh. Where it reaches
+  EPS / 2 on some mesh, n is doubled and the ladder starts again from its first mesh (at most
+  MODE_DOUBLINGS times); a level is accepted when the mesh estimate plus the mode-count
+  difference of the finest mesh is below EPS.
 
 Error estimate (:func:`estimate`), per component from the successive levels with h = 1 / (elements
 along the span): with three levels whose differences have one sign and shrink, and whose observed
@@ -56,7 +60,7 @@ BEAM_LEVELS = 8
 MAX_DOF = 100_000
 #: observed orders accepted for Richardson (the clamp singularity gives ~1.5 on Q2, beams 2)
 MIN_ORDER, MAX_ORDER = 0.5, 8.0
-#: mode-count doublings tried on the mesh reached (FFRF, GCMS)
+#: doublings of the mode count n (the ladder's meshes at n and 2 n modes; FFRF, GCMS)
 MODE_DOUBLINGS = 3
 SOLIDS = ("ffrf", "gcms", "tlf")
 MODAL = {"ffrf": "ffrf_modes", "gcms": "gcms_modes"}
@@ -155,8 +159,26 @@ class Refiner:
             return self.done[key]
         t0 = time.perf_counter()
         form = build(self.method, scene, self.comm, self.options)
+        return self._evaluate(key, scene, form, t0)
+
+    def truncated(self, scene: Scene, what: str, source: dict) -> dict:
+        """The level of ``scene`` whose mode count is below that of ``source`` (a level of the
+        same mesh, FFRF / GCMS): built on the source's mesh, operators and clamped modes, of
+        which it takes the first ones, so that a mode-count difference costs one eigensolve
+        (the larger) and one more projection."""
+        key = (what, scene.hash)
+        if key in self.done:
+            return self.done[key]
+        t0 = time.perf_counter()
+        big = source["form"]
+        form = type(big)(scene, self.comm, big.options, model=big.model, data=big.data,
+                         modes=big.modes)
+        form.options = big.options
+        return self._evaluate(key, scene, form, t0)
+
+    def _evaluate(self, key, scene: Scene, form, t0: float) -> dict:
         t1 = time.perf_counter()
-        if what == "steady":
+        if key[0] == "steady":
             st = form.steady_state()
             if not st.converged:
                 raise FxflexError(f"--tol: the {self.method} equilibrium on "
@@ -185,50 +207,60 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
             max_dof: int, log) -> dict:
     method = refiner.method
     steps = ladder(method, scene)[: max_levels or None]
-    share = 2.0 / 3.0 if method in MODAL else 1.0
-    hs, rows, err, how = [], [], None, []
-    capped = "the ladder's last level"
-    for h, overrides in steps:
-        level_scene = scene_from_dict(overrides, base=scene)
-        if _mesh_unknowns(method, level_scene) > max_dof and len(rows) >= 2:
-            capped = f"the cap of {max_dof} unknowns"
-            break
-        row = refiner.level(level_scene, what)
-        if rows and len(row["result"]) != len(rows[-1][0]["result"]):
-            raise FxflexError(f"--tol: the {method} levels give different numbers of modes")
-        hs.append(h)
-        rows.append((row, level_scene))
-        if log is not None:
-            log(f"--tol: {method} {row['discretisation']}: {row['dof']} unknowns, "
-                f"{row['seconds']:.2f} s")
-        if len(rows) >= 2:
-            values = [r["result"] for r, _ in rows]
-            err, how = estimate(hs, values, _scale(values[-1], what))
-            if np.all(err < share * eps):
+    key = MODAL.get(method)                   # FFRF / GCMS: each mesh at n and 2 n modes
+    count = getattr(scene.reduction, key) if key else 0
+    doublings, spent = 0, []                  # spent: the levels of a pass given up
+    while True:
+        hs, rows, levels, err, how = [], [], [], None, []
+        mode_err = 0.0
+        capped, restart = "the ladder's last level", False
+        for h, overrides in steps:
+            if key:
+                overrides = {**overrides, "reduction": {key: 2 * count}}
+            level_scene = scene_from_dict(overrides, base=scene)
+            if _mesh_unknowns(method, level_scene) > max_dof and len(rows) >= 2:
+                capped = f"the cap of {max_dof} unknowns"
                 break
-    else:
-        if max_levels:
-            capped = f"the cap of {max_levels} levels"
-    best, best_scene = rows[-1]
-    levels = [_public(r, what) for r, _ in rows]
+            row = refiner.level(level_scene, what)
+            if rows and len(row["result"]) != len(rows[-1][0]["result"]):
+                raise FxflexError(f"--tol: the {method} levels give different numbers of modes")
+            if key:                           # the first n of the same clamped modes
+                fewer = refiner.truncated(
+                    scene_from_dict({"reduction": {key: count}}, base=level_scene), what, row)
+                levels.append(_public(fewer, what))
+                mode_err, _ = estimate([2.0, 1.0], [fewer["result"], row["result"]],
+                                       _scale(row["result"], what))
+            levels.append(_public(row, what))
+            hs.append(h)
+            rows.append((row, level_scene))
+            if log is not None:
+                log(f"--tol: {method} {row['discretisation']}: {row['dof']} unknowns, "
+                    f"{row['seconds']:.2f} s")
+            if key and np.any(mode_err >= eps / 2.0) and doublings < MODE_DOUBLINGS:
+                restart = True
+                break
+            if len(rows) >= 2:
+                values = [r["result"] for r, _ in rows]
+                err, how = estimate(hs, values, _scale(values[-1], what))
+                if np.all(err + mode_err < eps):
+                    break
+        else:
+            if max_levels:
+                capped = f"the cap of {max_levels} levels"
+        if not restart:
+            break
+        spent += levels
+        count, doublings = 2 * count, doublings + 1
+        if log is not None:
+            log(f"--tol: {method} mode-count difference {float(np.max(mode_err)):.3g} >= EPS / 2: "
+                f"{key} {2 * count} against {count}, from the first mesh")
     if err is None:
         raise FxflexError("--tol: the cap leaves one level; allowed: two levels or more")
-    mode_err = np.zeros_like(err)
-    if method in MODAL and np.all(err < share * eps):
-        key = MODAL[method]
-        for _ in range(MODE_DOUBLINGS):
-            count = 2 * getattr(best_scene.reduction, key)
-            more_scene = scene_from_dict({"reduction": {key: count}}, base=best_scene)
-            more = refiner.level(more_scene, what)
-            levels.append(_public(more, what))
-            mode_err, _ = estimate([2.0, 1.0], [best["result"], more["result"]],
-                                   _scale(more["result"], what))
-            best, best_scene = more, more_scene
-            if np.all(mode_err < eps / 3.0):
-                break
-        else:
-            capped = f"{MODE_DOUBLINGS} doublings of the mode count"
-    if len(levels) > len(rows):
+    if key and doublings == MODE_DOUBLINGS and np.any(mode_err >= eps / 2.0):
+        capped = f"{MODE_DOUBLINGS} doublings of the mode count"
+    best, best_scene = rows[-1]
+    levels = spent + levels
+    if key:
         how = [f"{k} + mode-count difference" for k in how]
     total = err + mode_err
     out = {"best": best, "scene": best_scene, "estimate": [float(x) for x in total],

@@ -140,3 +140,55 @@ def test_modes_tol(capsys):
 def test_tol_bad_input(capsys, args, words):
     status, _, err = _cli(capsys, *args)
     assert status == 2 and words in err and len(err.strip().splitlines()) == 1
+
+
+def test_ffrf_tol_pairs_each_mesh_with_the_first_half_of_its_modes():
+    """FFRF ``steady --tol 1e-2`` (default scene, 1000 rpm): every mesh of the ladder is solved
+    at 2 n clamped modes, and its n-mode level is built on the first n of them; that level
+    equals a fresh build at n modes to the eigensolver's accuracy (tolerance 1e-12 on the
+    residuals; 1e-7 of |tip| here), the estimate holds the finest mesh's mode-count
+    difference, and the result lies within EPS of the stored linear reference (its own error
+    below 1e-5 of |tip|)."""
+    from fxflex.analysis import reference as refmod
+    from fxflex.analysis.tolerance import Refiner, steady_to_tolerance
+    from fxflex.bench.tol import true_errors
+
+    eps, n = 1e-2, Scene().reduction.ffrf_modes
+    refiner = Refiner("ffrf", MPI.COMM_WORLD)
+    out = steady_to_tolerance("ffrf", Scene(), MPI.COMM_WORLD, eps, refiner=refiner)
+    levels = out["levels"]
+    assert len(levels) % 2 == 0 and len(levels) >= 4
+    for fewer, more in zip(levels[0::2], levels[1::2]):
+        assert fewer["discretisation"]["mesh"] == more["discretisation"]["mesh"]
+        assert (fewer["discretisation"]["modes"], more["discretisation"]["modes"]) == (n, 2 * n)
+    assert out["discretisation"]["modes"] == 2 * n
+    assert all("mode-count difference" in h for h in out["how"])
+    last = scene_from_dict({"mesh": {"solid_degree": 2, "solid": levels[-1]["discretisation"]
+                                     ["mesh"]}}, base=Scene())
+    fresh = build("ffrf", last, MPI.COMM_WORLD).steady_state().tip
+    truncated = np.array(levels[-2]["tip_m"])
+    assert np.max(np.abs(truncated - fresh)) < 1e-7 * np.linalg.norm(fresh)
+    difference = np.abs(truncated - np.array(levels[-1]["tip_m"])) / np.linalg.norm(
+        levels[-1]["tip_m"])
+    assert np.all(np.array(out["estimate"]) >= difference)
+    ref = refmod.stored_reference(Scene())["theories"]["linear"]["1000"]["reference_m"]
+    assert np.max(true_errors(out["best"]["result"], ref, "steady")) < eps
+
+
+def test_tol_doubles_a_mode_count_that_is_too_small():
+    """A scene with 2 clamped modes (GCMS: 6 global ones): the first mesh's mode-count
+    difference is above EPS / 2, so the count is doubled and the ladder starts again; the
+    levels given up are reported, and the result meets EPS against the stored reference."""
+    from fxflex.analysis import reference as refmod
+    from fxflex.analysis.tolerance import steady_to_tolerance
+    from fxflex.bench.tol import true_errors
+
+    eps = 1e-2
+    scene = scene_from_dict({"reduction": {"gcms_modes": 6}}, base=Scene())
+    out = steady_to_tolerance("gcms", scene, MPI.COMM_WORLD, eps)
+    counts = [lv["discretisation"]["modes"] for lv in out["levels"]]
+    assert counts[:2] == [6, 12] and out["discretisation"]["modes"] > 12
+    assert [lv["discretisation"]["mesh"] for lv in out["levels"]].count([8, 2, 2]) >= 4
+    assert max(out["estimate"]) < eps
+    ref = refmod.stored_reference(Scene())["theories"]["linear"]["1000"]["reference_m"]
+    assert np.max(true_errors(out["best"]["result"], ref, "steady")) < eps
