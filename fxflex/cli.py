@@ -746,7 +746,8 @@ def _tol_report(args, scene, plan: _RunPlan, res, tol: dict | None) -> tuple[dic
         error = dict(zip(COMPONENTS, ad["error_estimate"]))
         time_info = {"integrator": plan.integrator, "rho_inf": plan.rho_inf, "eps": plan.tol,
                      "steps": ad["accepted"], "rejected": ad["rejected"],
-                     "dt_first_s": plan.dt, "dt_min_s": ad["h_min"], "dt_max_s": ad["h_max"],
+                     "newton_failures": ad["newton_failures"], "dt_first_s": plan.dt,
+                     "dt_min_s": ad["h_min"], "dt_max_s": ad["h_max"],
                      "sample_dt_s": plan.sample_dt, "factorizations":
                      res.stats.get("factorizations"),
                      "estimate_kind": "Zienkiewicz-Xie local error per unit step, summed"}

@@ -100,6 +100,7 @@ class Clock:
     h_min: float = math.inf
     h_max: float = 0.0
     factor_changes: int = 0   # steps whose size differed from the previous one
+    newton_failures: int = 0  # of the rejected steps, those whose Newton iteration failed
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -256,6 +257,7 @@ def simulate_adaptive(form, eps: float, t_end: float, *, h0: float, scale: float
                 except NewtonFailure as exc:
                     _restore(scheme, q, v, q_old, v_old, qdd_old, a_old)
                     clock.rejected += 1
+                    clock.newton_failures += 1
                     just_rejected = True
                     clock.h = h * NEWTON_CUT
                     if clock.h < H_FLOOR * span:

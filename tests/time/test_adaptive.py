@@ -74,6 +74,33 @@ def test_nebb_history_within_eps():
     assert _error(res.history, _reference(form, 1e-6)) < 1e-3
 
 
+def test_newton_failures_are_counted_rejections_and_cut_the_step(lebb, monkeypatch):
+    """A step whose Newton iteration fails is redone at NEWTON_CUT of its size and counted both
+    as rejected and in ``newton_failures`` (what `run --tol` reports in
+    discretisation.time); the history stays within EPS of the fine run."""
+    from fxflex.time import adaptive
+    from fxflex.time.generalized_alpha import NewtonFailure
+
+    form, ref = lebb
+    plain = _adaptive(form, 1e-3)
+    assert plain.adaptive["newton_failures"] == 0
+    real, tried = adaptive.GeneralizedAlpha.step, []
+
+    def failing(self, form_, t, h, q, v):      # the 3rd and 4th attempted steps fail
+        tried.append(h)
+        if len(tried) in (3, 4):
+            raise NewtonFailure("forced", t + h, t)
+        return real(self, form_, t, h, q, v)
+
+    monkeypatch.setattr(adaptive.GeneralizedAlpha, "step", failing)
+    res = _adaptive(form, 1e-3)
+    info = res.adaptive
+    assert info["newton_failures"] == 2
+    assert info["rejected"] >= 2
+    assert tried[3] == pytest.approx(adaptive.NEWTON_CUT * tried[2], rel=1e-12)
+    assert res.diverged is None and _error(res.history, ref) < 1e-3
+
+
 def test_steps_fall_when_eps_grows(lebb):
     form, _ = lebb
     steps = [_adaptive(form, eps).steps for eps in (1e-4, 1e-3, 1e-2)]
