@@ -11,7 +11,9 @@ Refinement ladder per method (:func:`ladder`), cheap first, only through existin
   docs/convergence_measured.md);
 - NEBB, ANCF: ``mesh.beam_variant = "locking-free"`` (unless the scene sets another variant than
   the default "paper" -- a scene that names "paper" explicitly is the default and is refined
-  locking-free too), elements 4, 8, ... (NEBB) and 5, 10, ... (ANCF);
+  locking-free too), elements 4, 8, ... (NEBB) and 2, 4, ... (ANCF: from 2, not 5, since
+  2026-12-06: its 2-4-8-16 levels reach EPS at a third to a half of the 5-10-20 levels' cost,
+  steady and modes, docs/tolerance.md);
 - TLF, FFRF, GCMS: ``mesh.solid_degree = 2`` (27-node hexahedra) on ``mesh.solid`` =
   8x2x2, 16x2x2, 32x4x2, 48x6x4, 64x8x4, 96x12x6 (Y and Z divisions stay even, SPEC 8). FFRF and
   GCMS solve every mesh at 2 n modes (``reduction.ffrf_modes`` / ``gcms_modes``, n the scene's)
@@ -54,7 +56,7 @@ COMPONENTS = ("longitudinal", "orthogonal", "load")
 #: Q2 meshes (nx, ny, nz) of the solid methods, coarse to fine
 SOLID_LADDER = ((8, 2, 2), (16, 2, 2), (32, 4, 2), (48, 6, 4), (64, 8, 4), (96, 12, 6))
 #: beam element counts: first level and number of doublings
-BEAM_START = {"lebb": 2, "nebb": 4, "ancf": 5}
+BEAM_START = {"lebb": 2, "nebb": 4, "ancf": 2}
 BEAM_LEVELS = 8
 #: default cap on the unknowns of a level (Q2 64x8x4 has 58752; 96x12x6 187200 is refused)
 MAX_DOF = 100_000
