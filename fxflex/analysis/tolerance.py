@@ -19,10 +19,11 @@ Refinement ladder per method (:func:`ladder`), cheap first, only through existin
   GCMS solve every mesh at 2 n modes (``reduction.ffrf_modes`` / ``gcms_modes``, n the scene's)
   and take the result at n from the first n of the same clamped modes (one eigensolve and one
   more projection, :meth:`Refiner.truncated`): the mode-count difference |f_n - f_2n| bounds
-  the truncation error of f_n, and so of the 2 n result returned, on that mesh. Where it reaches
-  EPS / 2 on some mesh, n is doubled and the ladder starts again from its first mesh (at most
-  MODE_DOUBLINGS times); a level is accepted when the mesh estimate plus the mode-count
-  difference of the finest mesh is below EPS.
+  the truncation error of f_n, and so of the 2 n result returned, on that mesh. A level is
+  accepted when the mesh estimate plus the mode-count difference of the finest mesh is below
+  EPS. Where it is not, and the mode-count difference is both at least EPS / 2 and at least the
+  mesh estimate (the count, not the mesh, is short), n is doubled and the ladder starts again
+  from its first mesh (at most MODE_DOUBLINGS times, and while 4 n modes fit the first mesh).
 
 Error estimate (:func:`estimate`), per component from the successive levels with h = 1 / (elements
 along the span): with three levels whose differences have one sign and shrink, and whose observed
@@ -238,13 +239,15 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
             if log is not None:
                 log(f"--tol: {method} {row['discretisation']}: {row['dof']} unknowns, "
                     f"{row['seconds']:.2f} s")
-            if key and np.any(mode_err >= eps / 2.0) and doublings < MODE_DOUBLINGS:
-                restart = True
-                break
             if len(rows) >= 2:
                 values = [r["result"] for r, _ in rows]
                 err, how = estimate(hs, values, _scale(values[-1], what))
                 if np.all(err + mode_err < eps):
+                    break
+                if key and doublings < MODE_DOUBLINGS and np.any(
+                        (mode_err >= eps / 2.0) & (mode_err >= err)) and _pair_fits(
+                        method, 4 * count, scene_from_dict(steps[0][1], base=scene)):
+                    restart = True            # the mode count, not the mesh, is what is short
                     break
         else:
             if max_levels:
@@ -258,7 +261,8 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                 f"{key} {2 * count} against {count}, from the first mesh")
     if err is None:
         raise FxflexError("--tol: the cap leaves one level; allowed: two levels or more")
-    if key and doublings == MODE_DOUBLINGS and np.any(mode_err >= eps / 2.0):
+    if key and doublings == MODE_DOUBLINGS and np.any(
+            (mode_err >= eps / 2.0) & (mode_err >= err)):
         capped = f"{MODE_DOUBLINGS} doublings of the mode count"
     best, best_scene = rows[-1]
     levels = spent + levels
@@ -274,6 +278,13 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                               f"{worst:.3g} on {shown(best['discretisation'])} "
                               f"({best['dof']} unknowns)", out)
     return out
+
+
+def _pair_fits(method: str, count: int, scene: Scene) -> bool:
+    """Whether ``count`` (``reduction.ffrf_modes`` / ``gcms_modes``) fits ``scene``'s mesh: its
+    clamped modes (GCMS: count / 3) at most the mesh's unknowns."""
+    clamped = count // 3 if method == "gcms" else count
+    return clamped <= _mesh_unknowns(method, scene)
 
 
 def shown(discretisation: dict) -> str:
