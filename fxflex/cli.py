@@ -118,7 +118,8 @@ def _tolerance(p: argparse.ArgumentParser, what: str) -> None:
                    help=f"refine the discretisation until the estimated error ({what}) is "
                         "below EPS (docs/tolerance.md)")
     p.add_argument("--tol-levels", type=_count(2), metavar="N",
-                   help="with --tol: at most N levels of refinement (default: the whole ladder)")
+                   help="with --tol: at most N meshes of the refinement ladder (default: the "
+                        "whole ladder)")
 
 
 def make_parser() -> argparse.ArgumentParser:
@@ -757,7 +758,7 @@ def _tol_report(args, scene, plan: _RunPlan, res, tol: dict | None) -> tuple[dic
     else:
         error = dict.fromkeys(COMPONENTS)
         time_info = {"integrator": plan.integrator, "eps": plan.tol, "steps": res.steps,
-                     "rejected": 0, "dt_s": plan.dt, "rule": tol["rule"],
+                     "rejected": 0, "newton_failures": 0, "dt_s": plan.dt, "rule": tol["rule"],
                      "estimate_kind": "stability-bounded step, not estimated"}
         line = f"\n  --tol {plan.tol:g}: {plan.integrator} at dt {plan.dt:.3g} s ({tol['rule']})"
     line += (f"\n  discretisation: {shown(describe(scene, args.method))}"

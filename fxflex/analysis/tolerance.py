@@ -16,14 +16,18 @@ Refinement ladder per method (:func:`ladder`), cheap first, only through existin
   steady and modes, docs/tolerance.md);
 - TLF, FFRF, GCMS: ``mesh.solid_degree = 2`` (27-node hexahedra) on ``mesh.solid`` =
   8x2x2, 16x2x2, 32x4x2, 48x6x4, 64x8x4, 96x12x6 (Y and Z divisions stay even, SPEC 8). FFRF and
-  GCMS solve every mesh at 2 n modes (``reduction.ffrf_modes`` / ``gcms_modes``, n the scene's)
-  and take the result at n from the first n of the same clamped modes (one eigensolve and one
-  more projection, :meth:`Refiner.truncated`): the mode-count difference |f_n - f_2n| bounds
-  the truncation error of f_n, and so of the 2 n result returned, on that mesh. A level is
-  accepted when the mesh estimate plus the mode-count difference of the finest mesh is below
-  EPS. Where it is not, and the mode-count difference is both at least EPS / 2 and at least the
-  mesh estimate (the count, not the mesh, is short), n is doubled and the ladder starts again
-  from its first mesh (at most MODE_DOUBLINGS times, and while 4 n modes fit the first mesh).
+  GCMS solve every mesh at 2 n modes (``reduction.ffrf_modes`` / ``gcms_modes``, n the scene's,
+  at least :data:`MIN_MODES`) and take the result at n from the first n of the same clamped
+  modes (:meth:`Refiner.truncated`: one eigensolve, one more projection): the mode-count
+  difference |f_n - f_2n| estimates the truncation error of f_n, an upper estimate of that of
+  the 2 n result returned, on that mesh. It is an estimate, not a bound: a family that neither
+  count holds (no axial mode in 2 or 4 modes) changes nothing between them, hence the floor
+  MIN_MODES. A level is accepted when the mesh estimate plus the mode-count difference of the
+  finest mesh is below EPS. Where it is not, and the mode-count difference is both at least
+  EPS / 2 and at least the mesh estimate (the count, not the mesh, is short), n is doubled and
+  the ladder starts again from its first mesh (at most MODE_DOUBLINGS times, while 4 n modes
+  fit the first mesh; then the ladder stops there: a finer mesh cannot help). A first mesh that
+  the scene refuses (too few ANCF elements for its twist, more modes than unknowns) is skipped.
 
 Error estimate (:func:`estimate`), per component from the successive levels with h = 1 / (elements
 along the span): with three levels whose differences have one sign and shrink, and whose observed
@@ -67,6 +71,10 @@ MIN_ORDER, MAX_ORDER = 0.5, 8.0
 MODE_DOUBLINGS = 3
 SOLIDS = ("ffrf", "gcms", "tlf")
 MODAL = {"ffrf": "ffrf_modes", "gcms": "gcms_modes"}
+#: the smallest n of FFRF / GCMS's mode-count pairs (n, 2 n): the default counts, which hold the
+#: axial stretch; below them both counts can miss a family (no axial mode at all), and their
+#: difference then says nothing (module docstring)
+MIN_MODES = {"ffrf": 30, "gcms": 90}
 
 
 #: the scene keys that fix a method's spatial discretisation (``run --tol`` keeps a scene that
@@ -211,7 +219,7 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
     method = refiner.method
     steps = ladder(method, scene)[: max_levels or None]
     key = MODAL.get(method)                   # FFRF / GCMS: each mesh at n and 2 n modes
-    count = getattr(scene.reduction, key) if key else 0
+    count = max(getattr(scene.reduction, key), MIN_MODES[method]) if key else 0
     doublings, spent = 0, []                  # spent: the levels of a pass given up
     while True:
         hs, rows, levels, err, how = [], [], [], None, []
@@ -224,6 +232,8 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
             if _mesh_unknowns(method, level_scene) > max_dof and len(rows) >= 2:
                 capped = f"the cap of {max_dof} unknowns"
                 break
+            if not rows and _refused(method, level_scene, log):
+                continue                      # too coarse for the scene: the next mesh
             row = refiner.level(level_scene, what)
             if rows and len(row["result"]) != len(rows[-1][0]["result"]):
                 raise FxflexError(f"--tol: the {method} levels give different numbers of modes")
@@ -244,10 +254,14 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                 err, how = estimate(hs, values, _scale(values[-1], what))
                 if np.all(err + mode_err < eps):
                     break
-                if key and doublings < MODE_DOUBLINGS and np.any(
-                        (mode_err >= eps / 2.0) & (mode_err >= err)) and _pair_fits(
-                        method, 4 * count, scene_from_dict(steps[0][1], base=scene)):
-                    restart = True            # the mode count, not the mesh, is what is short
+                if key and np.any((mode_err >= eps / 2.0) & (mode_err >= err)):
+                    # the mode count, not the mesh, is what is short: a finer mesh cannot help
+                    restart = doublings < MODE_DOUBLINGS and _pair_fits(
+                        method, 4 * count, scene_from_dict(steps[0][1], base=scene))
+                    if not restart:
+                        capped = (f"{MODE_DOUBLINGS} doublings of the mode count"
+                                  if doublings == MODE_DOUBLINGS else
+                                  f"the mode counts the first mesh holds ({key} {2 * count})")
                     break
         else:
             if max_levels:
@@ -261,11 +275,13 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                 f"{key} {2 * count} against {count}, from the first mesh")
     if err is None:
         raise FxflexError("--tol: the cap leaves one level; allowed: two levels or more")
-    if key and doublings == MODE_DOUBLINGS and np.any(
-            (mode_err >= eps / 2.0) & (mode_err >= err)):
-        capped = f"{MODE_DOUBLINGS} doublings of the mode count"
     best, best_scene = rows[-1]
-    levels = spent + levels
+    # a given-up pass's 2 n levels are the next pass's n levels (the same builds): listed once
+    listed: list = []
+    for lv in spent + levels:
+        if lv["discretisation"] not in [x["discretisation"] for x in listed]:
+            listed.append(lv)
+    levels = listed
     if key:
         how = [f"{k} + mode-count difference" for k in how]
     total = err + mode_err
@@ -278,6 +294,23 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                               f"{worst:.3g} on {shown(best['discretisation'])} "
                               f"({best['dof']} unknowns)", out)
     return out
+
+
+def _refused(method: str, scene: Scene, log) -> bool:
+    """Whether the scene refuses this level of the ladder (a first mesh too coarse for it: ANCF
+    elements twisted by more than MAX_TWIST_PER_ELEMENT_DEG each, more modes than unknowns), so
+    that the ladder starts at the next level; logged."""
+    from fxflex.errors import SceneError
+    from fxflex.scene.load import validate_for
+
+    try:
+        validate_for(method, scene)
+    except SceneError as exc:
+        if log is not None:
+            log(f"--tol: {method} {describe(scene, method)} skipped: {exc}")
+        return True
+    return bool(MODAL.get(method)) and not _pair_fits(
+        method, getattr(scene.reduction, MODAL[method]), scene)
 
 
 def _pair_fits(method: str, count: int, scene: Scene) -> bool:

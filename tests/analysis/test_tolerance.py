@@ -144,13 +144,13 @@ def test_tol_bad_input(capsys, args, words):
 
 def test_ffrf_tol_pairs_each_mesh_with_the_first_half_of_its_modes():
     """FFRF ``steady --tol 1e-2`` (default scene, 1000 rpm): every mesh of the ladder is solved
-    at 2 n clamped modes, and its n-mode level is built on the first n of them; that level
-    equals a fresh build at n modes to the eigensolver's accuracy (tolerance 1e-12 on the
-    residuals; 1e-7 of |tip| here), the estimate holds the finest mesh's mode-count
-    difference, and the result lies within EPS of the stored linear reference (its own error
-    below 1e-5 of |tip|)."""
+    at 2 n clamped modes, and its n-mode level is built on the first n of the same modes; that
+    level equals a fresh build at n modes to the eigensolver's accuracy (tolerance 1e-12 on the
+    residuals; 1e-7 of |tip| here), the estimate is the mesh estimate of the 2 n levels plus the
+    finest mesh's mode-count difference, and the result lies within EPS of the stored linear
+    reference (its own error 4.4e-5 of |tip| at most)."""
     from fxflex.analysis import reference as refmod
-    from fxflex.analysis.tolerance import Refiner, steady_to_tolerance
+    from fxflex.analysis.tolerance import Refiner, _scale, steady_to_tolerance
     from fxflex.bench.tol import true_errors
 
     eps, n = 1e-2, Scene().reduction.ffrf_modes
@@ -161,6 +161,11 @@ def test_ffrf_tol_pairs_each_mesh_with_the_first_half_of_its_modes():
     for fewer, more in zip(levels[0::2], levels[1::2]):
         assert fewer["discretisation"]["mesh"] == more["discretisation"]["mesh"]
         assert (fewer["discretisation"]["modes"], more["discretisation"]["modes"]) == (n, 2 * n)
+    built = {(row["discretisation"]["modes"], tuple(row["discretisation"]["mesh"])): row["form"]
+             for row in refiner.done.values()}
+    for (count, mesh), form in built.items():
+        if count == n:                                 # the same clamped modes, not a re-solve
+            assert form.modes is built[(2 * n, mesh)].modes
     assert out["discretisation"]["modes"] == 2 * n
     assert all("mode-count difference" in h for h in out["how"])
     last = scene_from_dict({"mesh": {"solid_degree": 2, "solid": levels[-1]["discretisation"]
@@ -168,27 +173,44 @@ def test_ffrf_tol_pairs_each_mesh_with_the_first_half_of_its_modes():
     fresh = build("ffrf", last, MPI.COMM_WORLD).steady_state().tip
     truncated = np.array(levels[-2]["tip_m"])
     assert np.max(np.abs(truncated - fresh)) < 1e-7 * np.linalg.norm(fresh)
-    difference = np.abs(truncated - np.array(levels[-1]["tip_m"])) / np.linalg.norm(
-        levels[-1]["tip_m"])
-    assert np.all(np.array(out["estimate"]) >= difference)
+    more = [np.array(lv["tip_m"]) for lv in levels[1::2]]
+    mesh_est, _ = estimate([1.0 / lv["discretisation"]["mesh"][0] for lv in levels[1::2]], more,
+                           _scale(more[-1], "steady"))
+    difference, _ = estimate([2.0, 1.0], [truncated, more[-1]], _scale(more[-1], "steady"))
+    assert np.allclose(out["estimate"], mesh_est + difference, rtol=1e-12, atol=0)
     ref = refmod.stored_reference(Scene())["theories"]["linear"]["1000"]["reference_m"]
     assert np.max(true_errors(out["best"]["result"], ref, "steady")) < eps
 
 
-def test_tol_doubles_a_mode_count_that_is_too_small():
-    """A scene with 2 clamped modes (GCMS: 6 global ones): the first mesh's mode-count
-    difference is above EPS / 2, so the count is doubled and the ladder starts again; the
-    levels given up are reported, and the result meets EPS against the stored reference."""
+def test_tol_doubles_a_mode_count_that_is_too_small(monkeypatch):
+    """Below the floor MIN_MODES a scene's count is raised to it (GCMS 6 -> 90 / 180). With the
+    floor lowered to let 6 global modes (2 clamped) in, the second mesh's mode-count difference
+    is above EPS / 2 and above its mesh estimate, so the count is doubled and the ladder starts
+    again; every build is listed once, and the result (24 / 48 global modes) meets EPS against
+    the stored reference."""
     from fxflex.analysis import reference as refmod
-    from fxflex.analysis.tolerance import steady_to_tolerance
+    from fxflex.analysis import tolerance
     from fxflex.bench.tol import true_errors
 
     eps = 1e-2
     scene = scene_from_dict({"reduction": {"gcms_modes": 6}}, base=Scene())
-    out = steady_to_tolerance("gcms", scene, MPI.COMM_WORLD, eps)
-    counts = [lv["discretisation"]["modes"] for lv in out["levels"]]
-    assert counts[:2] == [6, 12] and out["discretisation"]["modes"] > 12
-    assert [lv["discretisation"]["mesh"] for lv in out["levels"]].count([8, 2, 2]) >= 4
+    floor = tolerance.steady_to_tolerance("gcms", scene, MPI.COMM_WORLD, eps)
+    assert floor["levels"][0]["discretisation"]["modes"] == 90
+    monkeypatch.setitem(tolerance.MIN_MODES, "gcms", 3)
+    out = tolerance.steady_to_tolerance("gcms", scene, MPI.COMM_WORLD, eps)
+    shown = [(lv["discretisation"]["mesh"], lv["discretisation"]["modes"]) for lv in out["levels"]]
+    assert shown[:2] == [([8, 2, 2], 6), ([8, 2, 2], 12)] and out["discretisation"]["modes"] > 12
+    assert len({(tuple(m), c) for m, c in shown}) == len(shown)            # each build once
     assert max(out["estimate"]) < eps
     ref = refmod.stored_reference(Scene())["theories"]["linear"]["1000"]["reference_m"]
     assert np.max(true_errors(out["best"]["result"], ref, "steady")) < eps
+
+
+def test_tol_skips_a_first_mesh_the_scene_refuses():
+    """A blade twisted by 200 deg: 2 ANCF elements would twist by 100 deg each (refused above
+    MAX_TWIST_PER_ELEMENT_DEG), so ANCF's ladder starts at 4."""
+    from fxflex.analysis.tolerance import steady_to_tolerance
+
+    scene = scene_from_dict({"geometry": {"twist_deg": 200.0}}, base=Scene())
+    out = steady_to_tolerance("ancf", scene, MPI.COMM_WORLD, 1e-2)
+    assert out["levels"][0]["discretisation"]["elements"] == 4

@@ -194,6 +194,7 @@ def test_run_tol_json_and_resume(capsys, tmp_path):
     d = json.loads(out)
     time_info = d["discretisation"]["time"]
     assert d["steps"] == time_info["steps"] > 0 and time_info["rejected"] >= 0
+    assert 0 <= time_info["newton_failures"] <= time_info["rejected"]
     assert set(d["error_estimate"]) == {"longitudinal", "orthogonal", "load"}
     assert max(d["error_estimate"].values()) < 1e-3
     assert d["discretisation"]["fixed_by"] is None
