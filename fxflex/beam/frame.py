@@ -15,7 +15,9 @@ with the inertia shape integrals (derived here, the paper's Appendix is not in t
     N = int rho N_f^T P N_f dV         (the paper's M_rr6: spin softening)
     g = int rho N_f^T S X0 dV,   n = int rho N_f^T P X0 dV    (n is the paper's M_rr2(,1))
 
-N_f = N_c N_E. Over a section N_c = N0 + Y0 N_Y + Z0 N_Z is linear in Y0, Z0, so each integral
+N_f = N_c N_E. NEBB adds to N the second-order rotation of its sections and tip body (the
+propeller moment, :func:`section_rotation_second_order`, docs/beams.md); LEBB, linear, does not.
+Over a section N_c = N0 + Y0 N_Y + Z0 N_Z is linear in Y0, Z0, so each integral
 reduces to the section properties A, S_Y, S_Z, I_Y, I_Z, I_YZ of Eq. 41 (see
 :func:`section_quadratic`), then to Gauss quadrature along X. Damping (Eq. 42, terms in delta A
 ignored as in the paper): D = c/rho M (relative model); the absolute model F_d = -c (U' + phi' S U)
@@ -47,7 +49,8 @@ from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
 
 __all__ = ["FloatingFrameBeam", "section_quadratic", "section_linear", "point_quadratic",
-           "point_linear", "N0", "NY", "NZ", "QUADRATURE_POINTS"]
+           "point_linear", "section_rotation_second_order", "point_rotation_second_order", "N0",
+           "NY", "NZ", "QUADRATURE_POINTS"]
 
 #: Gauss points per element along X (exact to degree 11: the taper makes the integrands
 #: polynomials of degree <= 10 for an untwisted beam; the twist adds smooth trigonometric terms)
@@ -106,6 +109,35 @@ def point_linear(Q: np.ndarray, mass: float, Pi: np.ndarray, Xc: np.ndarray) -> 
     return out
 
 
+def section_rotation_second_order(sec, X: np.ndarray) -> np.ndarray:
+    """The second-order rotation's share of the spin-softening matrix N at every station (6 x 6,
+    the propeller moment, docs/beams.md): the Hessian over theta of int (P X0) . u2 dA, where
+    u2 = ((theta . s) theta - |theta|^2 s) / 2 is the second-order displacement of the section
+    point s = (0, Y0, Z0) under the small rotation theta, X0 = (X, Y0, Z0):
+
+        [[-I_Z, X S_Z / 2, X S_Y / 2], [., 0, I_YZ / 2], [., ., -I_Z]]   (symmetric)
+
+    on the rotations, zero on the translations; X = R + x. With N it enters as -phi'^2 N: the
+    torsion and the in-plane slope gain +Omega^2 rho I_Z (I_Z = int Y0^2 dA, Y0 in the plane of
+    rotation)."""
+    X = np.asarray(X)
+    out = np.zeros(np.shape(sec.A) + (6, 6))
+    h = out[..., 3:, 3:]
+    h[..., 0, 0] = h[..., 2, 2] = sec.I_Z
+    h[..., 0, 1] = h[..., 1, 0] = -0.5 * X * sec.S_Z
+    h[..., 0, 2] = h[..., 2, 0] = -0.5 * X * sec.S_Y
+    h[..., 1, 2] = h[..., 2, 1] = -0.5 * sec.I_YZ
+    return -out
+
+
+def point_rotation_second_order(Pi: np.ndarray) -> np.ndarray:
+    """:func:`section_rotation_second_order` for the rigid tip body (6 x 6): -H with
+    H = tr(P Pi) I - (Pi P + P Pi) / 2 on the rotations (its first moments vanish about X_c)."""
+    out = np.zeros((6, 6))
+    out[3:, 3:] = 0.5 * (Pi @ P3 + P3 @ Pi) - np.trace(P3 @ Pi) * np.eye(3)
+    return out
+
+
 def section_stiffness(scene: Scene, sec) -> np.ndarray:
     """Cross-section stiffness matrix of Eq. 41 (4 x 4 at every station), generalized strains
     (W_X', W_Z'', W_Y'', theta_X'); J_X per ``section.torsion``."""
@@ -161,6 +193,9 @@ class FloatingFrameBeam(FormulationBase):
                                          Ne)
         vec = lambda Q: rho * np.einsum("eq,qai,eqa->ei", dx, Ne, section_linear(Q, sec, X))
         self.Me, Ge, Nme = mass(np.eye(3)), mass(S3), mass(P3)
+        if method == "nebb":                # the propeller moment (module docstring)
+            Nme = Nme + rho * np.einsum("eq,qai,eqab,qbj->eij", dx, Ne,
+                                        section_rotation_second_order(sec, X), Ne)
         self.KLe = np.einsum("eq,qai,eqab,qbj->eij", dx, tab.B, section_stiffness(scene, sec),
                              tab.B)
         fq_e = scene.load.line_load * np.einsum("eq,qi->ei", dx, Ne[:, 2, :])
@@ -177,6 +212,8 @@ class FloatingFrameBeam(FormulationBase):
             t = slice(n_full - 6, n_full)
             for key, Q in (("M", np.eye(3)), ("G", S3), ("N", P3)):
                 full[key][t, t] += point_quadratic(Q, m, Pi)
+            if method == "nebb":
+                full["N"][t, t] += point_rotation_second_order(Pi)
             for key, Q in (("g", S3), ("n", P3)):
                 full[key][t] += point_linear(Q, m, Pi, Xc)
             self.I0 += m * Xc @ P3 @ Xc + float(np.trace(P3 @ Pi))

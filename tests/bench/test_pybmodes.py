@@ -74,16 +74,16 @@ def test_torsion_at_rest_differs_by_the_linear_elements_error(at_rest):
 
 
 def test_torsion_under_rotation_two_laws(at_rest, tmp_path):
-    """At 10000 rpm: pyBModes carries the propeller moment, omega^2 = omega_0^2 + Omega^2
-    (I_yy - I_zz) / I_p (section mass moments); NEBB's linear rotation field keeps only the
-    spin softening, omega^2 = omega_0^2 - Omega^2 I_zz / I_p (docs/pybmodes.md: a term LEBB and
-    NEBB lack). pyBModes to its error (it uses the undeformed tension); NEBB to twice the root
-    axial strain rho Omega^2 L^2 / (2E), the size of its stretched state's other changes."""
+    """At 10000 rpm: pyBModes and NEBB carry the propeller moment, omega^2 = omega_0^2 + Omega^2
+    (I_yy - I_zz) / I_p (section mass moments; NEBB through the second-order rotation of its
+    sections, docs/beams.md); LEBB's linear rotation field keeps only the spin softening,
+    omega^2 = omega_0^2 - Omega^2 I_zz / I_p (docs/pybmodes.md). pyBModes to its error (it uses
+    the undeformed tension); NEBB and LEBB to twice the root axial strain rho Omega^2 L^2 / (2E),
+    the size of the stretched state's other changes."""
     rpm = 10000.0
-    case, peer, ours = _both(1.0, rpm, N, tmp_path, methods=("nebb",))
+    case, peer, ours = _both(1.0, rpm, N, tmp_path, methods=("nebb", "lebb"))
     rest_peer = at_rest[1.0][1][("torsion", 1)]
-    _, _, rest = _both(1.0, 0.0, N, tmp_path, methods=("nebb",))
-    rest_ours = rest["nebb"][("torsion", 1)]
+    _, _, rest = _both(1.0, 0.0, N, tmp_path, methods=("nebb", "lebb"))
     g, m = case.geometry, case.material
     Iyy, Izz = g.root_z * g.root_y ** 3 / 12, g.root_y * g.root_z ** 3 / 12   # about Z, Y
     Omega2 = (rpm * math.pi / 30) ** 2
@@ -91,7 +91,9 @@ def test_torsion_under_rotation_two_laws(at_rest, tmp_path):
     assert shift(peer[("torsion", 1)], rest_peer) == pytest.approx(
         (Iyy - Izz) / (Iyy + Izz), rel=1e-3)
     strain = m.rho * Omega2 * g.length ** 2 / (2 * m.E)
-    assert shift(ours["nebb"][("torsion", 1)], rest_ours) == pytest.approx(
+    assert shift(ours["nebb"][("torsion", 1)], rest["nebb"][("torsion", 1)]) == pytest.approx(
+        (Iyy - Izz) / (Iyy + Izz), rel=2 * strain)
+    assert shift(ours["lebb"][("torsion", 1)], rest["lebb"][("torsion", 1)]) == pytest.approx(
         -Izz / (Iyy + Izz), rel=2 * strain)
 
 
