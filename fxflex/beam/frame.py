@@ -16,7 +16,9 @@ with the inertia shape integrals (derived here, the paper's Appendix is not in t
     g = int rho N_f^T S X0 dV,   n = int rho N_f^T P X0 dV    (n is the paper's M_rr2(,1))
 
 N_f = N_c N_E. NEBB adds to N the second-order rotation of its sections and tip body (the
-propeller moment, :func:`section_rotation_second_order`, docs/beams.md); LEBB, linear, does not.
+propeller moment, :func:`section_rotation_second_order`, docs/beams.md), and its Euler-force
+counterpart GS to phi'' G in the stiffness (:func:`section_rotation_second_order_euler`; the drive
+torque gains d/dt (W.GS W')); LEBB, linear, does neither.
 Over a section N_c = N0 + Y0 N_Y + Z0 N_Z is linear in Y0, Z0, so each integral
 reduces to the section properties A, S_Y, S_Z, I_Y, I_Z, I_YZ of Eq. 41 (see
 :func:`section_quadratic`), then to Gauss quadrature along X. Damping (Eq. 42, terms in delta A
@@ -49,7 +51,8 @@ from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
 
 __all__ = ["FloatingFrameBeam", "section_quadratic", "section_linear", "point_quadratic",
-           "point_linear", "section_rotation_second_order", "point_rotation_second_order", "N0",
+           "point_linear", "section_rotation_second_order", "point_rotation_second_order",
+           "section_rotation_second_order_euler", "point_rotation_second_order_euler", "N0",
            "NY", "NZ", "QUADRATURE_POINTS"]
 
 #: Gauss points per element along X (exact to degree 11: the taper makes the integrands
@@ -138,6 +141,32 @@ def point_rotation_second_order(Pi: np.ndarray) -> np.ndarray:
     return out
 
 
+def section_rotation_second_order_euler(sec, X: np.ndarray) -> np.ndarray:
+    """The Euler-force counterpart of :func:`section_rotation_second_order` (6 x 6 at every
+    station): the Hessian over theta of int (S X0) . u2 dA,
+
+        [[-X S_Z, -I_Z / 2, -I_YZ / 2], [., 0, X S_Y / 2], [., ., -X S_Z]]   (symmetric)
+
+    on the rotations. It joins phi'' G in the stiffness (a spin-up): the Euler force
+    -phi'' S x does work on u2 as the centrifugal one does."""
+    X = np.asarray(X)
+    out = np.zeros(np.shape(sec.A) + (6, 6))
+    h = out[..., 3:, 3:]
+    h[..., 0, 0] = h[..., 2, 2] = -X * sec.S_Z
+    h[..., 0, 1] = h[..., 1, 0] = -0.5 * sec.I_Z
+    h[..., 0, 2] = h[..., 2, 0] = -0.5 * sec.I_YZ
+    h[..., 1, 2] = h[..., 2, 1] = 0.5 * X * sec.S_Y
+    return out
+
+
+def point_rotation_second_order_euler(Pi: np.ndarray) -> np.ndarray:
+    """:func:`section_rotation_second_order_euler` for the rigid tip body (6 x 6): (S Pi - Pi S)
+    / 2 on the rotations."""
+    out = np.zeros((6, 6))
+    out[3:, 3:] = 0.5 * (S3 @ Pi - Pi @ S3)
+    return out
+
+
 def section_stiffness(scene: Scene, sec) -> np.ndarray:
     """Cross-section stiffness matrix of Eq. 41 (4 x 4 at every station), generalized strains
     (W_X', W_Z'', W_Y'', theta_X'); J_X per ``section.torsion``."""
@@ -193,9 +222,12 @@ class FloatingFrameBeam(FormulationBase):
                                          Ne)
         vec = lambda Q: rho * np.einsum("eq,qai,eqa->ei", dx, Ne, section_linear(Q, sec, X))
         self.Me, Ge, Nme = mass(np.eye(3)), mass(S3), mass(P3)
-        if method == "nebb":                # the propeller moment (module docstring)
+        second = method == "nebb"            # the propeller moment (module docstring)
+        if second:
             Nme = Nme + rho * np.einsum("eq,qai,eqab,qbj->eij", dx, Ne,
                                         section_rotation_second_order(sec, X), Ne)
+            GSe = rho * np.einsum("eq,qai,eqab,qbj->eij", dx, Ne,
+                                  section_rotation_second_order_euler(sec, X), Ne)
         self.KLe = np.einsum("eq,qai,eqab,qbj->eij", dx, tab.B, section_stiffness(scene, sec),
                              tab.B)
         fq_e = scene.load.line_load * np.einsum("eq,qi->ei", dx, Ne[:, 2, :])
@@ -203,6 +235,8 @@ class FloatingFrameBeam(FormulationBase):
                 "N": _assemble(Nme, n_full, 6), "K": _assemble(self.KLe, n_full, 6),
                 "g": _assemble(vec(S3), n_full, 6), "n": _assemble(vec(P3), n_full, 6),
                 "fq": _assemble(fq_e, n_full, 6)}
+        if second:
+            full["GS"] = _assemble(GSe, n_full, 6)
         # int rho X0^T P X0 dV: the undeformed beam's moment of inertia about the axis
         self.I0 = float(rho * np.sum(dx * (sec.A * X**2 + 2 * X * sec.S_Z + sec.I_Z)))
         tip = scene.tip_mass
@@ -212,8 +246,9 @@ class FloatingFrameBeam(FormulationBase):
             t = slice(n_full - 6, n_full)
             for key, Q in (("M", np.eye(3)), ("G", S3), ("N", P3)):
                 full[key][t, t] += point_quadratic(Q, m, Pi)
-            if method == "nebb":
+            if second:
                 full["N"][t, t] += point_rotation_second_order(Pi)
+                full["GS"][t, t] += point_rotation_second_order_euler(Pi)
             for key, Q in (("g", S3), ("n", P3)):
                 full[key][t] += point_linear(Q, m, Pi, Xc)
             self.I0 += m * Xc @ P3 @ Xc + float(np.trace(P3 @ Pi))
@@ -230,6 +265,9 @@ class FloatingFrameBeam(FormulationBase):
         Minv = np.linalg.inv(self.M)
         self.Minv = 0.5 * (Minv + Minv.T)
         self.MiK, self.MiG, self.MiN = self.Minv @ self.K, self.Minv @ self.G, self.Minv @ self.N
+        # NEBB: the Euler force's share of the second-order rotation, with phi'' (symmetric)
+        self.GS = np.ascontiguousarray(full["GS"][f, f]) if second else None
+        self.MiGS = self.Minv @ self.GS if second else None
         self.Mi_fq, self.Mi_tip = self.Minv @ self.fq, self.Minv @ self.ftip
         self.Mi_load = self.Mi_fq + self.Mi_tip          # both follow the load ramp
         self.load = self.fq + self.ftip
@@ -277,6 +315,9 @@ class FloatingFrameBeam(FormulationBase):
         Kq, Cv, nn = self._Kq, self._Cv, self._nn
         np.multiply(self.MiG, accel + (self.c_rho * rate if self.absolute else 0.0), out=Kq)
         Kq += self.MiK
+        if self.GS is not None and accel:
+            np.multiply(self.MiGS, accel, out=nn)
+            Kq += nn
         np.multiply(self.MiN, rate * rate, out=nn)
         Kq -= nn
         np.multiply(self.MiG, 2.0 * rate, out=Cv)
@@ -333,6 +374,9 @@ class FloatingFrameBeam(FormulationBase):
         Keff, Ceff = self._Keff, self._Ceff
         np.multiply(self.G, accel + (self.c_rho * rate if self.absolute else 0.0), out=Keff)
         Keff += self.K
+        if self.GS is not None and accel:
+            np.multiply(self.GS, accel, out=self._nn)
+            Keff += self._nn
         np.multiply(self.N, rate * rate, out=self._nn)
         Keff -= self._nn
         np.multiply(self.G, 2.0 * rate, out=Ceff)
@@ -402,6 +446,8 @@ class FloatingFrameBeam(FormulationBase):
         self._memo_v[:] = v
         torque = (self.g @ a - q @ (self.G @ a) + 2 * rate * (self.n @ v + q @ (self.N @ v))
                   + accel * (self.I0 + 2 * self.n @ q + q @ (self.N @ q)))
+        if self.GS is not None:             # d/dt of the second-order relative momentum
+            torque += v @ (self.GS @ v) + q @ (self.GS @ a)
         Fx, Fy, _ = np.asarray(self.scene.load.tip_force) * self.scene.load.factor(t)
         x_tip = self.line.hub_radius + self.line.length + q[-6]
         torque -= x_tip * Fy - q[-5] * Fx

@@ -1,6 +1,8 @@
 """NEBB: Euler-Bernoulli beam with von Karman strain in the floating frame (Sect. 3.2, Eq. 45-48).
 
-Kinematics, inertia and damping are LEBB's (:mod:`fxflex.beam.frame`); the axial strain gains the
+Kinematics, inertia and damping are LEBB's (:mod:`fxflex.beam.frame`), except that NEBB's
+spin-softening matrix N and phi'' stiffness carry the second-order rotation of its sections and
+tip body (the propeller moment, docs/beams.md); the axial strain gains the
 von Karman term, eps_X = W_X' - Z0 W_Z'' - Y0 W_Y'' + (W_Y'^2 + W_Z'^2) / 2 (Eq. 45). Over a
 section the strain energy becomes
 
