@@ -214,3 +214,19 @@ def test_tol_skips_a_first_mesh_the_scene_refuses():
     scene = scene_from_dict({"geometry": {"twist_deg": 200.0}}, base=Scene())
     out = steady_to_tolerance("ancf", scene, MPI.COMM_WORLD, 1e-2)
     assert out["levels"][0]["discretisation"]["elements"] == 4
+
+
+def test_estimate_caps_a_pre_asymptotic_order():
+    """f(h) = 1 + h^6 on h = 1/32, 1/48, 1/64 (the solids' ladder): Richardson's estimate of the
+    finest level's error is exact (order 6); with the cap 2 that the solids' frequencies use it is
+    |f_3 - f_2| / ((h_2 / h_3)^2 - 1), larger by the factor the order makes."""
+    h = np.array([1 / 32, 1 / 48, 1 / 64])
+    f = 1.0 + h**6
+    exact, how = estimate(h, f, 1.0)
+    capped, how_capped = estimate(h, f, 1.0, order_cap=2.0)
+    assert how == how_capped == ["richardson"]
+    assert exact[0] == pytest.approx(h[-1] ** 6, rel=1e-6)
+    assert capped[0] == pytest.approx((f[1] - f[2]) / ((h[1] / h[2]) ** 2 - 1.0), rel=1e-12)
+    assert capped[0] > 3 * exact[0]
+    below, _ = estimate(h, 1.0 + h**1.5, 1.0, order_cap=2.0)          # below the cap: unchanged
+    assert below[0] == pytest.approx(estimate(h, 1.0 + h**1.5, 1.0)[0][0], rel=1e-12)
