@@ -170,6 +170,7 @@ class Refiner:
     def __init__(self, method: str, comm, options=None, pairs: int = 6):
         self.method, self.comm, self.options, self.pairs = method, comm, options, pairs
         self.done: dict[tuple[str, str], dict] = {}
+        self._last: dict[str, object] = {}       # the last level's form per "steady" / "modes"
 
     def level(self, scene: Scene, what: str) -> dict:
         """One level: ``what`` = "steady" (tip, m) or "modes" (frequencies, Hz)."""
@@ -180,7 +181,24 @@ class Refiner:
             return self.done[key]
         t0 = time.perf_counter()
         form = build(self.method, scene, self.comm, self.options)
+        if self.method == "tlf":
+            self._seed(form, what)
         return self._evaluate(key, scene, form, t0)
+
+    def _seed(self, form, what: str) -> None:
+        """TLF: start the equilibrium from the previous level's, prolongated to this mesh
+        (nested iteration: one Newton continuation of about three iterations instead of the
+        stages from the undeformed body; :func:`fxflex.solid.tlf_steady.prolongate`)."""
+        from fxflex.solid.tlf_steady import prolongate
+
+        previous = self._last.get(what)
+        if previous is None or getattr(previous, "_steady", None) is None:
+            return
+        if previous.scene.rotation.omega != form.scene.rotation.omega:
+            return
+        U0 = prolongate(previous.model, previous._steady.q, form.model)
+        if U0 is not None:
+            form.steady_start = (form.scene.rotation.omega, U0)
 
     def truncated(self, scene: Scene, what: str, source: dict) -> dict:
         """The level of ``scene`` whose mode count is below that of ``source`` (a level of the
@@ -215,6 +233,7 @@ class Refiner:
                "result": values, "seconds": time.perf_counter() - t0,
                "build_s": t1 - t0, "form": form, **extra}
         self.done[key] = row
+        self._last[key[0]] = form
         return row
 
 

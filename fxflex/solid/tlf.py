@@ -127,11 +127,16 @@ class TLF(FormulationBase):
         return self._dyn
 
     # -- Formulation interface --------------------------------------------------------------------
+    #: (omega, owned U0): a starting guess for :meth:`steady_state` (one Newton continuation from
+    #: it instead of the stages from the undeformed body; the ``--tol`` ladder sets it from the
+    #: coarser level, :func:`fxflex.solid.tlf_steady.prolongate`)
+    steady_start: tuple[float, np.ndarray] | None = None
+
     def steady_state(self) -> SteadyState:
         if self._steady is None:
             linear = self.options.linear or "direct"
-            self._steady = (tlf_steady(self.model, linear=linear) if self.sweep is None
-                            else self.sweep.steady(self, linear))
+            self._steady = (tlf_steady(self.model, linear=linear, start=self.steady_start)
+                            if self.sweep is None else self.sweep.steady(self, linear))
         return self._steady
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:

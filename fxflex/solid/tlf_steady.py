@@ -105,3 +105,55 @@ def tlf_steady(model: SolidModel, omega: float | None = None, *, rtol: float = 1
                        residuals=residuals, converged=converged, timings=timings,
                        extra={"continuation_stages": stages, "linear": linear,
                               **({"krylov_iterations": krylov} if krylov else {})})
+
+
+def prolongate(coarse: SolidModel, U: np.ndarray, fine: SolidModel) -> np.ndarray | None:
+    """The owned entries of ``fine``'s displacement interpolated from the owned entries U of a
+    displacement on ``coarse``: a starting guess for the fine equilibrium (nested iteration, the
+    ``--tol`` ladder). Both meshes must be the generated ones of the paper's section (their
+    nodes sit on the structured grid of the unit block mapped by the twist and the taper,
+    :func:`fxflex.mesh.solid._generate`) and Q2 ``coarse``: U is then a tensor-product quadratic
+    on that grid, evaluated at the fine nodes' grid coordinates (not the element's own geometric
+    map, so a guess, not an interpolant of the finite-element function). None for any other
+    mesh. Collective (the coarse field is gathered on every rank: the ladder's coarse meshes are
+    small)."""
+    from mpi4py import MPI
+
+    from fxflex.mesh.geometry import BeamShape
+
+    sc = fine.scene
+    if (not sc.geometry.paper_shape or sc.mesh.solid_file or coarse.scene.mesh.solid_file
+            or coarse.degree != 2 or coarse.scene.geometry != sc.geometry):
+        return None
+    shape = BeamShape(sc.geometry)
+    L, R = shape.L, sc.geometry.hub_radius
+
+    def unit(X):                    # O-XYZ -> (x / L, eta + 1/2, zeta + 1/2) in [0, 1]^3
+        x = X[:, 0] - R
+        b, h, th = shape.sizes(x)
+        c, s = np.cos(th), np.sin(th)
+        yt, zt = c * X[:, 1] + s * X[:, 2], -s * X[:, 1] + c * X[:, 2]
+        return np.column_stack([x / L, yt / b + 0.5, zt / h + 0.5])
+
+    comm = coarse.comm
+    n = np.array(coarse.scene.mesh.solid)                       # coarse divisions
+    Xc = np.concatenate(comm.allgather(coarse.node_coordinates()))
+    Uc = np.concatenate(comm.allgather(np.asarray(U)[: coarse.n_owned].reshape(-1, 3)))
+    idx = np.rint(unit(Xc) * 2 * n).astype(int)                 # Q2 nodes: a 2n grid
+    if np.any(idx < 0) or np.any(idx > 2 * n) or np.abs(unit(Xc) * 2 * n - idx).max() > 1e-6:
+        return None
+    grid = np.full(tuple(2 * n + 1) + (3,), np.nan)
+    grid[idx[:, 0], idx[:, 1], idx[:, 2]] = Uc
+    if comm.allreduce(bool(np.isnan(grid).any()), op=MPI.LOR):
+        return None
+    p = np.clip(unit(fine.node_coordinates()), 0.0, 1.0) * n   # in element units
+    e = np.minimum(np.floor(p).astype(int), n - 1)
+    t = p - e
+    basis = np.stack([2 * (t - 0.5) * (t - 1), -4 * t * (t - 1), 2 * t * (t - 0.5)], axis=-1)
+    out = np.zeros((len(p), 3))
+    for a in range(3):
+        for b in range(3):
+            for c in range(3):
+                w = basis[:, 0, a] * basis[:, 1, b] * basis[:, 2, c]
+                out += w[:, None] * grid[2 * e[:, 0] + a, 2 * e[:, 1] + b, 2 * e[:, 2] + c]
+    return out.reshape(-1)
