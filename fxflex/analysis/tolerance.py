@@ -143,9 +143,11 @@ def estimate(h, values, scale, order_cap: float | None = None) -> tuple[np.ndarr
         if len(h) >= 3:
             d12, d23 = f[-3, k] - f[-2, k], f[-2, k] - f[-1, k]
             p, value = richardson(h[-3:], f[-3:, k])
-            if p is not None and abs(d23) < abs(d12) and MIN_ORDER <= p <= MAX_ORDER:
+            capped = order_cap is not None and p is not None and p > order_cap
+            if p is not None and abs(d23) < abs(d12) and MIN_ORDER <= p and (
+                    p <= MAX_ORDER or capped):
                 kind, e = "richardson", abs(f[-1, k] - value)
-                if order_cap is not None and p > order_cap:
+                if capped:                    # above MAX_ORDER too: the cap, not the difference
                     e = abs(d23) / ((h[-2] / h[-1]) ** order_cap - 1.0)
         err[k] = e / scale[k] if scale[k] > 0 else (0.0 if e == 0 else np.inf)
         how.append(kind)
@@ -192,9 +194,12 @@ class Refiner:
         from fxflex.solid.tlf_steady import prolongate
 
         previous = self._last.get(what)
-        if previous is None or getattr(previous, "_steady", None) is None:
+        steady = getattr(previous, "_steady", None)
+        if steady is None or not steady.converged:
             return
-        if previous.scene.rotation.omega != form.scene.rotation.omega:
+        problem = [{k: v for k, v in x.scene.to_dict().items() if k != "mesh"}
+                   for x in (previous, form)]
+        if problem[0] != problem[1]:            # another scene than this ladder's: no guess
             return
         U0 = prolongate(previous.model, previous._steady.q, form.model)
         if U0 is not None:

@@ -135,8 +135,14 @@ class TLF(FormulationBase):
     def steady_state(self) -> SteadyState:
         if self._steady is None:
             linear = self.options.linear or "direct"
-            self._steady = (tlf_steady(self.model, linear=linear, start=self.steady_start)
-                            if self.sweep is None else self.sweep.steady(self, linear))
+            if self.sweep is not None:
+                self._steady = self.sweep.steady(self, linear)
+            else:
+                st = tlf_steady(self.model, linear=linear, start=self.steady_start)
+                if not st.converged and self.steady_start is not None:
+                    st = tlf_steady(self.model, linear=linear)      # the guess failed: cold
+                    st.extra["cold_fallback"] = True
+                self._steady = st
         return self._steady
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:

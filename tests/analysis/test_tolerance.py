@@ -267,3 +267,17 @@ def test_tlf_levels_start_from_the_coarser_equilibrium():
     assert seeded.extra["continuation_stages"] == 1 < cold_fine.extra["continuation_stages"]
     assert seeded.iterations < cold_fine.iterations
     assert np.abs(seeded.tip - cold_fine.tip).max() < 1e-8 * np.linalg.norm(cold_fine.tip)
+
+
+def test_a_tlf_guess_that_fails_falls_back_to_the_cold_equilibrium():
+    """A starting guess whose Newton iteration does not converge (10 m everywhere) is dropped:
+    TLF's steady state is then solved from the undeformed body, flagged ``cold_fallback``, the
+    cold equilibrium itself."""
+    sc = scene_from_dict({"mesh": {"solid_degree": 2, "solid": [8, 2, 2]},
+                          "rotation": {"rpm": 5000.0}}, base=Scene())
+    cold = build("tlf", sc, MPI.COMM_WORLD).steady_state()
+    form = build("tlf", sc, MPI.COMM_WORLD)
+    form.steady_start = (sc.rotation.omega, np.full(form.model.n_owned, 10.0))
+    st = form.steady_state()
+    assert st.converged and st.extra.get("cold_fallback") is True
+    assert np.abs(st.tip - cold.tip).max() <= 1e-12 * np.linalg.norm(cold.tip)
