@@ -126,8 +126,8 @@ def ladder(method: str, scene: Scene) -> list[tuple[float, dict]]:
 
 def estimate(h, values, scale, order_cap: float | None = None) -> tuple[np.ndarray, list[str]]:
     """Per column of ``values`` (levels x quantities, h descending): the estimated error of the
-    last level relative to ``scale`` (a number or one per quantity), and how ("richardson" or
-    "difference"; module docstring). ``order_cap``: an observed order above it is taken as the
+    last level relative to ``scale`` (a number or one per quantity), and how ("richardson",
+    "richardson, order P taken as CAP" or "difference"; module docstring). ``order_cap``: an observed order above it is taken as the
     cap, |f_3 - f_2| / ((h_2 / h_3)^cap - 1) (a pre-asymptotic order would shrink the estimate).
     Needs two levels or more."""
     h = np.asarray(h, float)
@@ -148,6 +148,7 @@ def estimate(h, values, scale, order_cap: float | None = None) -> tuple[np.ndarr
                     p <= MAX_ORDER or capped):
                 kind, e = "richardson", abs(f[-1, k] - value)
                 if capped:                    # above MAX_ORDER too: the cap, not the difference
+                    kind = f"richardson, order {p:.2g} taken as {order_cap:g}"
                     e = abs(d23) / ((h[-2] / h[-1]) ** order_cap - 1.0)
         err[k] = e / scale[k] if scale[k] > 0 else (0.0 if e == 0 else np.inf)
         how.append(kind)

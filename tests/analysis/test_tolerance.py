@@ -224,7 +224,7 @@ def test_estimate_caps_a_pre_asymptotic_order():
     f = 1.0 + h**6
     exact, how = estimate(h, f, 1.0)
     capped, how_capped = estimate(h, f, 1.0, order_cap=2.0)
-    assert how == how_capped == ["richardson"]
+    assert how == ["richardson"] and how_capped[0].startswith("richardson, order 6")
     assert exact[0] == pytest.approx(h[-1] ** 6, rel=1e-6)
     assert capped[0] == pytest.approx((f[1] - f[2]) / ((h[1] / h[2]) ** 2 - 1.0), rel=1e-12)
     assert capped[0] > 3 * exact[0]
@@ -281,3 +281,31 @@ def test_a_tlf_guess_that_fails_falls_back_to_the_cold_equilibrium():
     st = form.steady_state()
     assert st.converged and st.extra.get("cold_fallback") is True
     assert np.abs(st.tip - cold.tip).max() <= 1e-12 * np.linalg.norm(cold.tip)
+
+
+def test_only_the_solids_frequencies_cap_the_order(monkeypatch):
+    """_refine passes SOLID_MODES_ORDER to the estimate for the solids' frequencies only: not for
+    their steady tips, not for the beams (seen by wrapping ``estimate``)."""
+    from fxflex.analysis import tolerance
+
+    seen = []
+    real = tolerance.estimate
+
+    def spy(h, values, scale, order_cap=None):
+        seen.append(order_cap)
+        return real(h, values, scale, order_cap)
+
+    monkeypatch.setattr(tolerance, "estimate", spy)
+    comm = MPI.COMM_WORLD
+    cases = [("modes", "tlf", tolerance.SOLID_MODES_ORDER), ("steady", "tlf", None),
+             ("modes", "lebb", None), ("steady", "lebb", None)]
+    for what, method, cap in cases:
+        seen.clear()
+        try:
+            if what == "modes":
+                tolerance.modes_to_tolerance(method, Scene(), comm, 1e-9, 2, max_levels=3)
+            else:
+                tolerance.steady_to_tolerance(method, Scene(), comm, 1e-9, max_levels=3)
+        except tolerance.ToleranceNotMet:
+            pass
+        assert seen and set(seen) == {cap}, (what, method, seen)
