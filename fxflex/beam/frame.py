@@ -17,8 +17,8 @@ with the inertia shape integrals (derived here, the paper's Appendix is not in t
 
 N_f = N_c N_E. NEBB adds to N the second-order rotation of its sections and tip body (the
 propeller moment, :func:`section_rotation_second_order`, docs/beams.md), and its Euler-force
-counterpart GS to phi'' G in the stiffness (:func:`section_rotation_second_order_euler`; the drive
-torque gains d/dt (W.GS W')); LEBB, linear, does neither.
+counterpart GS to phi'' G in the stiffness (the same function with S; the drive torque gains
+d/dt (W.GS W')); LEBB, linear, does neither.
 Over a section N_c = N0 + Y0 N_Y + Z0 N_Z is linear in Y0, Z0, so each integral
 reduces to the section properties A, S_Y, S_Z, I_Y, I_Z, I_YZ of Eq. 41 (see
 :func:`section_quadratic`), then to Gauss quadrature along X. Damping (Eq. 42, terms in delta A
@@ -51,8 +51,7 @@ from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
 
 __all__ = ["FloatingFrameBeam", "section_quadratic", "section_linear", "point_quadratic",
-           "point_linear", "section_rotation_second_order", "point_rotation_second_order",
-           "section_rotation_second_order_euler", "point_rotation_second_order_euler", "N0",
+           "point_linear", "section_rotation_second_order", "point_rotation_second_order", "N0",
            "NY", "NZ", "QUADRATURE_POINTS"]
 
 #: Gauss points per element along X (exact to degree 11: the taper makes the integrands
@@ -112,58 +111,40 @@ def point_linear(Q: np.ndarray, mass: float, Pi: np.ndarray, Xc: np.ndarray) -> 
     return out
 
 
-def section_rotation_second_order(sec, X: np.ndarray) -> np.ndarray:
-    """The second-order rotation's share of the spin-softening matrix N at every station (6 x 6,
-    the propeller moment, docs/beams.md): the Hessian over theta of int (P X0) . u2 dA, where
-    u2 = ((theta . s) theta - |theta|^2 s) / 2 is the second-order displacement of the section
-    point s = (0, Y0, Z0) under the small rotation theta, X0 = (X, Y0, Z0):
+def section_rotation_second_order(B: np.ndarray, sec, X: np.ndarray) -> np.ndarray:
+    """The second-order rotation's share of the rotating-frame matrix of B (6 x 6 at every
+    station, docs/beams.md "NEBB: the propeller moment"): the Hessian over theta of
+    int (B X0) . u2 dA, where u2 = ((theta . s) theta - |theta|^2 s) / 2 is the second-order
+    displacement of the section point s = (0, Y0, Z0) under the small rotation theta and
+    X0 = (X, Y0, Z0), X = R + x:
 
-        [[-I_Z, X S_Z / 2, X S_Y / 2], [., 0, I_YZ / 2], [., ., -I_Z]]   (symmetric)
+        sym(int s (B X0)^T dA) - (int s . B X0 dA) I
+          = sym(X F (B e_X)^T + Q B^T) - (X F . B e_X + tr(B Q)) I
 
-    on the rotations, zero on the translations; X = R + x. With N it enters as -phi'^2 N: the
-    torsion and the in-plane slope gain +Omega^2 rho I_Z (I_Z = int Y0^2 dA, Y0 in the plane of
-    rotation)."""
+    on the rotations (zero on the translations), F = int s dA = (0, S_Z, S_Y), Q = int s s^T dA.
+    B = P (centrifugal, added to N): [[-I_Z, X S_Z / 2, X S_Y / 2], [., 0, I_YZ / 2],
+    [., ., -I_Z]], so torsion and the in-plane slope gain +Omega^2 rho I_Z under -phi'^2 N; B = S
+    (Euler, joining phi'' G): [[-X S_Z, -I_Z / 2, -I_YZ / 2], [., 0, X S_Y / 2], [., ., -X S_Z]]."""
     X = np.asarray(X)
+    F = np.zeros(np.shape(sec.A) + (3,))
+    F[..., 1], F[..., 2] = sec.S_Z, sec.S_Y
+    Q = np.zeros(np.shape(sec.A) + (3, 3))
+    Q[..., 1, 1], Q[..., 2, 2] = sec.I_Z, sec.I_Y
+    Q[..., 1, 2] = Q[..., 2, 1] = sec.I_YZ
+    Be = B @ _EX
+    A = X[..., None, None] * F[..., :, None] * Be + Q @ B.T       # int s (B X0)^T dA
+    trace = X * (F @ Be) + np.einsum("ij,...ji->...", B, Q)       # int s . B X0 dA
     out = np.zeros(np.shape(sec.A) + (6, 6))
-    h = out[..., 3:, 3:]
-    h[..., 0, 0] = h[..., 2, 2] = sec.I_Z
-    h[..., 0, 1] = h[..., 1, 0] = -0.5 * X * sec.S_Z
-    h[..., 0, 2] = h[..., 2, 0] = -0.5 * X * sec.S_Y
-    h[..., 1, 2] = h[..., 2, 1] = -0.5 * sec.I_YZ
-    return -out
-
-
-def point_rotation_second_order(Pi: np.ndarray) -> np.ndarray:
-    """:func:`section_rotation_second_order` for the rigid tip body (6 x 6): -H with
-    H = tr(P Pi) I - (Pi P + P Pi) / 2 on the rotations (its first moments vanish about X_c)."""
-    out = np.zeros((6, 6))
-    out[3:, 3:] = 0.5 * (Pi @ P3 + P3 @ Pi) - np.trace(P3 @ Pi) * np.eye(3)
+    out[..., 3:, 3:] = 0.5 * (A + np.swapaxes(A, -1, -2)) - trace[..., None, None] * np.eye(3)
     return out
 
 
-def section_rotation_second_order_euler(sec, X: np.ndarray) -> np.ndarray:
-    """The Euler-force counterpart of :func:`section_rotation_second_order` (6 x 6 at every
-    station): the Hessian over theta of int (S X0) . u2 dA,
-
-        [[-X S_Z, -I_Z / 2, -I_YZ / 2], [., 0, X S_Y / 2], [., ., -X S_Z]]   (symmetric)
-
-    on the rotations. It joins phi'' G in the stiffness (a spin-up): the Euler force
-    -phi'' S x does work on u2 as the centrifugal one does."""
-    X = np.asarray(X)
-    out = np.zeros(np.shape(sec.A) + (6, 6))
-    h = out[..., 3:, 3:]
-    h[..., 0, 0] = h[..., 2, 2] = -X * sec.S_Z
-    h[..., 0, 1] = h[..., 1, 0] = -0.5 * sec.I_Z
-    h[..., 0, 2] = h[..., 2, 0] = -0.5 * sec.I_YZ
-    h[..., 1, 2] = h[..., 2, 1] = 0.5 * X * sec.S_Y
-    return out
-
-
-def point_rotation_second_order_euler(Pi: np.ndarray) -> np.ndarray:
-    """:func:`section_rotation_second_order_euler` for the rigid tip body (6 x 6): (S Pi - Pi S)
-    / 2 on the rotations."""
+def point_rotation_second_order(B: np.ndarray, Pi: np.ndarray) -> np.ndarray:
+    """:func:`section_rotation_second_order` for the rigid tip body (6 x 6): its first moments
+    vanish about X_c, so sym(Pi B^T) - tr(B Pi) I on the rotations (B = P: (Pi P + P Pi) / 2 -
+    tr(P Pi) I; B = S: (S Pi - Pi S) / 2)."""
     out = np.zeros((6, 6))
-    out[3:, 3:] = 0.5 * (S3 @ Pi - Pi @ S3)
+    out[3:, 3:] = 0.5 * (Pi @ B.T + B @ Pi) - np.trace(B @ Pi) * np.eye(3)
     return out
 
 
@@ -218,16 +199,14 @@ class FloatingFrameBeam(FormulationBase):
         X = line.hub_radius + line.xq
         # element matrices by quadrature of the section integrals (Eq. 39, 41)
         Ne = tab.N
-        mass = lambda Q: rho * np.einsum("eq,qai,eqab,qbj->eij", dx, Ne, section_quadratic(Q, sec),
-                                         Ne)
+        integral = lambda A6: rho * np.einsum("eq,qai,eqab,qbj->eij", dx, Ne, A6, Ne)
+        mass = lambda Q: integral(section_quadratic(Q, sec))
         vec = lambda Q: rho * np.einsum("eq,qai,eqa->ei", dx, Ne, section_linear(Q, sec, X))
         self.Me, Ge, Nme = mass(np.eye(3)), mass(S3), mass(P3)
         second = method == "nebb"            # the propeller moment (module docstring)
         if second:
-            Nme = Nme + rho * np.einsum("eq,qai,eqab,qbj->eij", dx, Ne,
-                                        section_rotation_second_order(sec, X), Ne)
-            GSe = rho * np.einsum("eq,qai,eqab,qbj->eij", dx, Ne,
-                                  section_rotation_second_order_euler(sec, X), Ne)
+            Nme = Nme + integral(section_rotation_second_order(P3, sec, X))
+            GSe = integral(section_rotation_second_order(S3, sec, X))
         self.KLe = np.einsum("eq,qai,eqab,qbj->eij", dx, tab.B, section_stiffness(scene, sec),
                              tab.B)
         fq_e = scene.load.line_load * np.einsum("eq,qi->ei", dx, Ne[:, 2, :])
@@ -247,8 +226,8 @@ class FloatingFrameBeam(FormulationBase):
             for key, Q in (("M", np.eye(3)), ("G", S3), ("N", P3)):
                 full[key][t, t] += point_quadratic(Q, m, Pi)
             if second:
-                full["N"][t, t] += point_rotation_second_order(Pi)
-                full["GS"][t, t] += point_rotation_second_order_euler(Pi)
+                full["N"][t, t] += point_rotation_second_order(P3, Pi)
+                full["GS"][t, t] += point_rotation_second_order(S3, Pi)
             for key, Q in (("g", S3), ("n", P3)):
                 full[key][t] += point_linear(Q, m, Pi, Xc)
             self.I0 += m * Xc @ P3 @ Xc + float(np.trace(P3 @ Pi))

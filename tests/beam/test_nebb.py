@@ -144,7 +144,7 @@ def test_propeller_moment_of_the_sections_and_the_tip_body(uniform, body):
 
 
 def test_second_order_rotation_matrices_against_an_exact_rotation():
-    """section_rotation_second_order (and its Euler counterpart, and the tip body's) are the
+    """section_rotation_second_order with B = P and S (and the tip body's) are the
     Hessians over theta of sum w (B X0) . u2 with B = P (centrifugal) and S (Euler), u2 the
     second-order part of R(theta) s - s for the exact rotation R = exp([theta]x): checked on a
     weighted cloud of section points with non-zero first moments and product of inertia (so
@@ -156,10 +156,7 @@ def test_second_order_rotation_matrices_against_an_exact_rotation():
 
     from scipy.spatial.transform import Rotation
 
-    from fxflex.beam.frame import (point_rotation_second_order,
-                                   point_rotation_second_order_euler,
-                                   section_rotation_second_order,
-                                   section_rotation_second_order_euler)
+    from fxflex.beam.frame import point_rotation_second_order, section_rotation_second_order
     from fxflex.scene.kinematics import P3, S3
 
     rng = np.random.default_rng(3)
@@ -179,11 +176,15 @@ def test_second_order_rotation_matrices_against_an_exact_rotation():
         u2 = cloud @ R.T - cloud - np.cross(eps * theta, cloud)          # O(eps^2)
         return np.sum(w * np.einsum("ki,ij,kj->k", x0, B.T, u2)) / eps**2
 
-    for B, section, point in ((P3, section_rotation_second_order, point_rotation_second_order),
-                              (S3, section_rotation_second_order_euler,
-                               point_rotation_second_order_euler)):
-        H = section(sec, Xs)[3:, 3:]
-        Hb = point(Pi_c)[3:, 3:]
+    I_Z, I_Y, I_YZ, S_Z, S_Y = sec.I_Z, sec.I_Y, sec.I_YZ, sec.S_Z, sec.S_Y
+    closed = {0: np.array([[-I_Z, Xs * S_Z / 2, Xs * S_Y / 2], [Xs * S_Z / 2, 0, I_YZ / 2],
+                           [Xs * S_Y / 2, I_YZ / 2, -I_Z]]),          # the docstring's, B = P
+              1: np.array([[-Xs * S_Z, -I_Z / 2, -I_YZ / 2], [-I_Z / 2, 0, Xs * S_Y / 2],
+                           [-I_YZ / 2, Xs * S_Y / 2, -Xs * S_Z]])}    # B = S
+    for which, B in enumerate((P3, S3)):
+        H = section_rotation_second_order(B, sec, Xs)[3:, 3:]
+        Hb = point_rotation_second_order(B, Pi_c)[3:, 3:]
+        assert np.allclose(H, closed[which], rtol=0, atol=1e-14 * np.abs(H).max())
         for _ in range(3):
             theta = rng.standard_normal(3)
             for cloud, x0, Hk in ((pts, pts + np.array([Xs, 0.0, 0.0]), H),
