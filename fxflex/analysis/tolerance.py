@@ -202,7 +202,7 @@ class Refiner:
                    for x in (previous, form)]
         if problem[0] != problem[1]:            # another scene than this ladder's: no guess
             return
-        U0 = prolongate(previous.model, previous._steady.q, form.model)
+        U0 = prolongate(previous.model, steady.q, form.model)
         if U0 is not None:
             form.steady_start = (form.scene.rotation.omega, U0)
 

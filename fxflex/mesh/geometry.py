@@ -113,6 +113,16 @@ class BeamShape:
         b, h, _ = self.sizes(x)
         return self.point(x, b * np.asarray(eta, float), h * np.asarray(zeta, float))
 
+    def unit_from_point(self, X: np.ndarray) -> np.ndarray:
+        """The inverse of :meth:`point_from_unit` for points X (n, 3) in O-XYZ: (x, eta, zeta)
+        per row, x from the root, eta and zeta fractions of the local sizes."""
+        X = np.asarray(X, float)
+        x = X[:, 0] - self.g.hub_radius
+        b, h, th = self.sizes(x)
+        c, s = np.cos(th), np.sin(th)
+        return np.column_stack([x, (c * X[:, 1] + s * X[:, 2]) / b,
+                                (-s * X[:, 1] + c * X[:, 2]) / h])
+
     def section(self, x) -> SectionProperties:
         """Properties at stations x: closed forms for the paper's rectangle, the interpolated
         2-D analysis (:mod:`fxflex.section.span`) for any other section, whose torsion constant

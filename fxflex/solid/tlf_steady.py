@@ -126,14 +126,9 @@ def prolongate(coarse: SolidModel, U: np.ndarray, fine: SolidModel) -> np.ndarra
             or coarse.degree != 2 or coarse.scene.geometry != sc.geometry):
         return None
     shape = BeamShape(sc.geometry)
-    L, R = shape.L, sc.geometry.hub_radius
 
     def unit(X):                    # O-XYZ -> (x / L, eta + 1/2, zeta + 1/2) in [0, 1]^3
-        x = X[:, 0] - R
-        b, h, th = shape.sizes(x)
-        c, s = np.cos(th), np.sin(th)
-        yt, zt = c * X[:, 1] + s * X[:, 2], -s * X[:, 1] + c * X[:, 2]
-        return np.column_stack([x / L, yt / b + 0.5, zt / h + 0.5])
+        return shape.unit_from_point(X) / np.array([shape.L, 1.0, 1.0]) + np.array([0, .5, .5])
 
     comm = coarse.comm
     n = np.array(coarse.scene.mesh.solid)                       # coarse divisions

@@ -257,6 +257,10 @@ def test_tlf_levels_start_from_the_coarser_equilibrium():
         eta, zeta = (c * X[:, 1] + s * X[:, 2]) / b, (-s * X[:, 1] + c * X[:, 2]) / h
         return np.column_stack([x**2 * eta, x * zeta**2 + eta, eta * zeta * x]).reshape(-1)
 
+    rng = np.random.default_rng(1)                  # BeamShape.unit_from_point inverts the map
+    unit = rng.uniform([0.0, -0.5, -0.5], [g.length, 0.5, 0.5], (20, 3))
+    X = np.column_stack(shape.point_from_unit(*unit.T))
+    assert np.abs(shape.unit_from_point(X) - unit).max() < 1e-14
     guess = prolongate(coarse, field(coarse.node_coordinates()), fine)
     exact = field(fine.node_coordinates())
     assert np.abs(guess - exact).max() <= 1e-12 * max(np.abs(exact).max(), 1.0)
