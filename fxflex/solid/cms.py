@@ -35,6 +35,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fxflex import cache
+from fxflex.errors import FxflexError
 
 if TYPE_CHECKING:                   # a cache hit needs neither PETSc nor dolfinx: imported on use
     from petsc4py import PETSc
@@ -83,6 +84,10 @@ def mass_and_stiffness(model: SolidModel) -> tuple[PETSc.Mat, PETSc.Mat]:
     M = model.matrix(model.compile(model.mass_form()), diagonal=0.0)
     body = tip_body(model)
     if body is not None:
+        if body.director is not None:   # refused by validate_for before this
+            raise FxflexError("tip_mass.inertia: the floating frame carries a tip body flat in "
+                              "the tip section plane; allowed: J_X = J_Y + J_Z, or tlf, lebb, "
+                              "nebb, ancf")
         body.add_to(M)
     return K, M
 

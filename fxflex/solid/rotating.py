@@ -16,7 +16,10 @@ from the hub and U* the steady state, a perturbation dU obeys
   material and geometric (prestress) stiffness; -Omega^2 M_P is the derivative of the centrifugal
   load on the deformed position (spin softening).
 - a [tip_mass] adds mu (x) B to each M_B (with the consistent or the lumped mass of the
-  solid: the body stays rigid, :mod:`fxflex.solid.tip_mass`).
+  solid: the body stays rigid, :mod:`fxflex.solid.tip_mass`); its extent along X (Pi_XX) adds
+  the director's J^T J to M, 2 Omega J^T S J (+ (c/rho) J^T J) to C and its steady derivative
+  to K, all at U* (:class:`fxflex.solid.tip_mass.Director`: n the unit normal of the tip
+  face's fit).
 
 The root clamp is eliminated: every matrix is the sub-matrix on the free coordinates, which each
 rank numbers in the order of its owned entries.
@@ -152,4 +155,13 @@ def tlf_matrices(model: SolidModel, U: np.ndarray, omega: float, c_rho: float, a
         body.add_to(M, rows=at)
         body.add_to(C, 2.0 * omega * S3 + c_rho * eye, rows=at)
         body.add_to(K, B, rows=at)
+        director = body.director
+        if director is not None:         # Pi_XX: J^T J, 2 Omega J^T S J, the steady derivative
+            circulatory = c_rho * omega if absolute else 0.0
+            Bd, _, K6 = director.rotating(U, omega**2, circulatory)
+            JJ = director.pi * (Bd.T @ Bd)
+            director.add_to(M, JJ, rows=at)
+            director.add_to(C, 2.0 * omega * director.pi * (Bd.T @ S3 @ Bd) + c_rho * JJ,
+                            rows=at)
+            director.add_to(K, K6, rows=at)
     return M, C, K

@@ -188,6 +188,8 @@ class TLF(FormulationBase):
         d = self.dynamics
         alpha, beta, dphi, c, s = self._loads(t, q)
         rhs = d.rhs
+        if d.director is not None:               # Pi_XX's quadratic-velocity force
+            d.director.add_spread(d.director.moving(q, v), rhs, -1.0)
         if d.mass == "lumped":
             np.multiply(rhs, d.m_inv, out=out)
             if d.body is not None:               # (D + M_tip)^-1 (fxflex.solid.tip_mass)
@@ -198,6 +200,8 @@ class TLF(FormulationBase):
                 b_arr[:] = rhs_j
                 d.ksp.solve(d.b, d.x)
                 out[j::3] = x_arr
+        if d.director is not None:               # and its mass, J^T J at q: Woodbury
+            d.director.woodbury(out)
         if d.c_rho > 0.0:                        # M^-1 D = c / rho
             if dphi == 0.0:                      # not turning: both models damp u'
                 axpy(-d.c_rho, v, out)
@@ -214,6 +218,8 @@ class TLF(FormulationBase):
         d = self.dynamics
         _, _, dphi, c, s = self._loads(t, q)
         out[:] = d.rhs
+        if d.director is not None:               # takes (q, v): mass_apply's M(q) from here
+            d.director.add_spread(d.director.moving(q, v), out, -1.0)
         if d.c_rho > 0.0:
             d.damped_rate(dphi, c, s, q, v)
             self.mass_apply(d.y, d.my)
@@ -221,7 +227,8 @@ class TLF(FormulationBase):
         out[d.root] = 0.0
 
     def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
-        """M_ff x_f: lumped row sums, or the consistent mass per component (M = M_s (x) I_3)."""
+        """M_ff x_f: lumped row sums, or the consistent mass per component (M = M_s (x) I_3); a
+        tip body's Pi_XX adds its J^T J at the q of the last ``force`` call."""
         d = self.dynamics
         if d.mass == "lumped":
             np.multiply(x, d.m, out=out)
@@ -233,6 +240,8 @@ class TLF(FormulationBase):
                 b_arr[d.root_nodes] = 0.0              # the scalar mass is 1 on root rows
                 d.M.mult(d.b, d.x)
                 out[j::3] = x_arr
+        if d.director is not None:                     # M(q) at the last force()'s q
+            d.director.mass_apply(x, out)
         out[d.root] = 0.0
 
     def factorize(self, t: float, q: np.ndarray, v: np.ndarray, m: float, c: float, k: float

@@ -1,7 +1,9 @@
 """What the TLF time loop touches, built once before it (STYLE habit 4): the internal force route,
 the mass of Eq. 29 (lumped row sums or the factorised consistent mass), the loads, the root-node
 data of the prescribed drive, the damped rate of Eq. 34 / 68, and the work arrays. A [tip_mass]
-joins the mass (:mod:`fxflex.solid.tip_mass`): the inertial frame needs nothing else."""
+joins the mass (:mod:`fxflex.solid.tip_mass`): the inertial frame needs nothing else; its extent
+along X (Pi_XX) is a configuration-dependent mass of rank 3, a Woodbury update of this one
+(:class:`fxflex.solid.tip_mass.Director`)."""
 
 from __future__ import annotations
 
@@ -82,6 +84,9 @@ class Dynamics:
             self.b, self.x = self.M.createVecs()
             b_arr, x_arr = self.b.getArray(), self.x.getArray()
             self.components = [(self.rhs[j::3], b_arr, x_arr) for j in range(3)]
+        self.director = body.director if body is not None else None
+        if self.director is not None:             # Pi_XX: its Woodbury update of this mass
+            self.director.prepare(self.base_solve)
         tlf.timings["mass_build"] = time.perf_counter() - t1
         # damping (Eq. 34 relative, Eq. 68 absolute)
         self.c_rho = scene.damping.c / scene.material.rho
@@ -90,6 +95,19 @@ class Dynamics:
         self.A = np.eye(3)
         self.y, self.my = np.empty(n), np.empty(n)
         self.root_nodes = model.root_owned
+
+    def base_solve(self, x: np.ndarray) -> None:
+        """x <- M0^-1 x on the owned entries, M0 the solid's mass with the body's isotropic part
+        (root rows: the identity of the scalar mass, or 1 / m_a). Collective."""
+        if self.mass == "lumped":
+            x *= self.m_inv
+            if self.body is not None:
+                self.body.woodbury(x)
+        else:
+            for j, (_, b_arr, x_arr) in enumerate(self.components):
+                b_arr[:] = x[j::3]
+                self.ksp.solve(self.b, self.x)
+                x[j::3] = x_arr
 
     def _lifting(self, M_full: PETSc.Mat, root_values: np.ndarray) -> np.ndarray:
         r, y = M_full.createVecs()

@@ -259,8 +259,8 @@ class GeneralizedAlpha:
             np.multiply(x, cv, out=vn)
             vn += self.vb
             form.constrain(t1, qn, vn)
+            form.force(t1, qn, vn, f)           # first: M may depend on that q (TLF's tip body)
             form.mass_apply(x, r)
-            form.force(t1, qn, vn, f)
             r -= f
             self.factor.solve(t1, r, dx)
             x -= dx
