@@ -21,10 +21,10 @@ face; over the last node layer its weights grow as 1 / h, and Pi_XX then loads t
 axial and shear strain rates with an inertia Pi_XX / h^2: local modes whose frequencies fall as
 the mesh is refined, measured from 189 to 73 Hz between 40 and 320 layers. A scalar mass per
 node pair cannot tell a rotation from a strain there.) The rest, Pi_XX, TLF carries on the
-face's unit normal n = g_Y x g_Z / |g_Y x g_Z| (:class:`Director`: a mass that depends on the
-configuration, exact for every rigid motion of the face); FFRF and GCMS, whose reductions rest
-on the constant isotropic mass below, refuse it with one line
-(:func:`fxflex.scene.load.validate_for`).
+face's unit normal n = g_Y x g_Z / |g_Y x g_Z| (:class:`fxflex.numerics.director.Director`, on
+the columns G below: a mass that depends on the configuration, exact for every rigid motion of
+the face); FFRF and GCMS, whose reductions rest on the constant isotropic mass below, refuse it
+with one line (:func:`fxflex.scene.load.validate_for`).
 
 Then for any rigid motion of the face, v_a = v_c + omega x r_a' (r_a' = A r_a, any rotation A,
 not only a small one), the kinetic energy 1/2 sum mu_ab v_a . v_b is
@@ -57,6 +57,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fxflex.errors import FxflexError
+from fxflex.numerics.director import Director
 from fxflex.scene import Scene
 from fxflex.scene.load import tip_body_is_flat
 
@@ -107,8 +108,8 @@ class TipBody:
         Pi = np.diag(tip.second_moments())
         flat = tip_body_is_flat(tip.inertia)
         G = self._face_gradients(model, w) if (np.any(Pi[1:] > 0.0) or not flat) else None
-        #: the body's extent along X (Pi_XX > 0): the director g_X = g_Y x g_Z, see Director
-        self.director = None if flat else Director(model, G, float(Pi[0]))
+        #: the body's extent along X (Pi_XX > 0): its X axis the face's normal (Director)
+        self.director = None if flat else Director.on_face(model, G, float(Pi[0]))
         if np.any(Pi[1:] > 0.0):
             for k in (1, 2):
                 if Pi[k] > 0.0:
@@ -209,201 +210,6 @@ class TipBody:
             idx = rows[(3 * self.nodes[:, None] + np.arange(3)).reshape(-1)]
         cols = np.concatenate(self.model.comm.allgather(idx)).astype(PETSc.IntType)
         values = scale * np.kron((self.V * self.C) @ self.V_all.T, B)
-        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-        if idx.size:
-            A.setValues(idx.astype(PETSc.IntType), cols, values,
-                        addv=PETSc.InsertMode.ADD_VALUES)
-        A.assemble()
-
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b of two 3-vectors (np.cross costs ~40 us a call, in a time loop)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
-
-
-def skew(a: np.ndarray) -> np.ndarray:
-    """[a]x: the 3 x 3 matrix of a x ."""
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-
-
-class Director:
-    """The tip body's extent along X (Pi_XX > 0) on the tip face: the unit normal n of its fit.
-
-    With g_Y, g_Z the face's affine-fit gradients applied to the nodal positions y (any frame:
-    the hub frame's X0 + U, the inertial x0 + u), (g_Y, g_Z) = W y, W = [G_Y (x) I_3; G_Z (x) I_3]
-    (6 x 3n, the same G as TipBody's columns; W X0 = (e_Y, e_Z)), the body's X axis is the unit
-    normal of the plane they span,
-
-        n = c / |c|,  c = g_Y x g_Z,
-
-    its rotation is [n, g_Y, g_Z] for every rigid motion of the face (any rotation), and with
-    T = 1/2 sum_k Pi_kk |g_k'|^2 (g_X = n) the body's kinetic energy is exact there; TipBody
-    carries Pi_YY, Pi_ZZ as a constant (isotropic) mass, this class the rest, Pi_XX |n'|^2 / 2,
-    whose mass depends on the configuration. n is normalised: the face's in-plane area change
-    (Poisson, or a load on it) moves no inertia and takes no load from the body (unnormalised,
-    c's length follows the area and the centrifugal pull on Pi_XX, Omega^2 Pi_XX along X, would
-    stretch the face in its plane: 1.1 % on the 0.12 x 0.06 m uniform solid with Pi_XX = 1 kg m^2
-    at 3000 rpm). With B(g) = [-[g_Z]x, [g_Y]x] (3 x 6, c' = B W y') and P_n = I - n n^T:
-
-        n' = J y',  J = B_n W,  B_n = P_n B / |c|,
-        n'' = J y'' + k,  k = (P_n (2 g_Y' x g_Z') - 2 n' (n . c')) / |c| - n |n'|^2,
-
-    and the generalized inertia force is exactly Pi_XX J^T n'' (n a function of y alone); J^T n
-    = 0, so the force is Pi_XX W^T B_n^T (B_n W y'' + k). Seen from the hub turning at Omega
-    about z, n'' becomes n'' + 2 Omega S n' - Omega^2 P n (NOTES.md: a material point's
-    kinematics), so:
-
-    - steady state: Pi_XX J^T f with f = -Omega^2 P n [+ (c/rho) Omega S (n - e_X), the absolute
-      damping of the director's rate relative to the rigidly turning e_X]; its derivative
-      Pi_XX W^T (B_n^T K3 B_n + B^T Hc(f) B + H6(P_n f / |c|)) W, K3 = df/dn, with the second
-      derivatives of f . c / |c| in c, Hc(f) = -(n f^T P_n + P_n f n^T + (f . n) P_n) / |c|^2,
-      and of the bilinear c in y, H6(a) = [[0, -[a]x], [[a]x, 0]] (d(B^T a)/dy = W^T H6(a) W);
-    - linearised about it: M += Pi_XX J^T J, C += Pi_XX (2 Omega J^T S J + (c/rho) J^T J),
-      K += the steady derivative above: the terms the solid's M_B gives an isotropic mass;
-    - in time (inertial frame): the mass Pi_XX J^T J (rank 2 in the fixed 6-column space of W^T:
-      a Woodbury update of any mass the solid has) and the force Pi_XX W^T B_n^T k.
-
-    Relative damping, (c/rho) times the whole mass: J y with y = u' - phi' S (x0 + u) is n' -
-    phi' S n (the director's rate seen from the hub), since S (a x b) = S a x b + a x S b and
-    P_n S n = S n.
-    """
-
-    def __init__(self, model: SolidModel, G: np.ndarray, pi_xx: float):
-        comm = model.comm
-        self.model, self.pi = model, pi_xx
-        self.nodes = np.flatnonzero(np.any(G != 0.0, axis=1))   # owned face nodes
-        self.G = G[self.nodes]                                   # (nodes, 2): G_Y, G_Z
-        self.G_all = np.concatenate(comm.allgather(self.G))
-        first = model.V.dofmap.index_map.local_range[0]
-        self.global_nodes = first + self.nodes
-        self.x0 = model.node_coordinates().reshape(-1)           # owned X0
-        self._C = self.mass6(np.zeros(model.n_owned))           # until the first moving()
-        self._Ct = np.zeros((6, 6))
-
-    # -- the director -----------------------------------------------------------------------------
-    def gradients(self, y: np.ndarray) -> np.ndarray:
-        """W y: (2, 3) rows g_Y, g_Z of the owned-entry array y (positions or rates), on every
-        rank. Collective."""
-        part = y.reshape(-1, 3)[self.nodes]
-        return self.model.comm.allreduce(self.G.T @ part)
-
-    @staticmethod
-    def B(g: np.ndarray) -> np.ndarray:
-        """B(g) (3 x 6) for g = W y (2, 3): c' = B W y'."""
-        return np.hstack([-skew(g[1]), skew(g[0])])
-
-    @classmethod
-    def normal(cls, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, np.ndarray,
-                                             np.ndarray]:
-        """(B, n, |c|, P_n, B_n) at g = W y (class docstring)."""
-        B = cls.B(g)
-        c = cross(g[0], g[1])
-        size = float(np.linalg.norm(c))
-        n = c / size
-        Pn = np.eye(3) - np.outer(n, n)
-        return B, n, size, Pn, Pn @ B / size
-
-    @staticmethod
-    def H6(a: np.ndarray) -> np.ndarray:
-        """H6(a) (6 x 6): d(B(g)^T a)/dy = W^T H6(a) W at fixed a (symmetric)."""
-        F = skew(a)
-        Z = np.zeros((3, 3))
-        return np.block([[Z, -F], [F, Z]])
-
-    def spread(self, f6: np.ndarray) -> np.ndarray:
-        """W^T f6: the owned entries (n_owned,) for f6 (6,)."""
-        out = np.zeros(self.model.n_owned)
-        self.add_spread(f6, out)
-        return out
-
-    def add_spread(self, f6: np.ndarray, out: np.ndarray, scale: float = 1.0) -> None:
-        """out += scale W^T f6 on the owned entries."""
-        out.reshape(-1, 3)[self.nodes] += scale * (self.G[:, :1] * f6[:3]
-                                                   + self.G[:, 1:] * f6[3:])
-
-    # -- the rotating frame -------------------------------------------------------------------------
-    def rotating(self, U: np.ndarray, w2: float, circulatory: float = 0.0
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """At the hub-frame displacement U (owned entries), speed^2 w2 and circulatory
-        coefficient (c/rho) Omega (absolute damping; else 0): (B_n, f6, K6) with the steady force
-        Pi_XX J^T f = W^T f6 and its derivative W^T K6 W (class docstring). Collective."""
-        from fxflex.scene.kinematics import P3, S3
-
-        B, n, size, Pn, Bn = self.normal(self.gradients(self.x0 + U))
-        K3 = -w2 * P3 + circulatory * S3
-        f = -w2 * (P3 @ n) + circulatory * (S3 @ (n - np.array([1.0, 0.0, 0.0])))
-        pf = Pn @ f
-        Hc = -(np.outer(n, pf) + np.outer(pf, n) + float(f @ n) * Pn) / size**2
-        K6 = Bn.T @ K3 @ Bn + B.T @ Hc @ B + self.H6(pf / size)
-        return Bn, self.pi * (Bn.T @ f), self.pi * K6
-
-    # -- the inertial frame (TLF's time loop) -------------------------------------------------------
-    def mass6(self, q: np.ndarray) -> np.ndarray:
-        """Pi_XX B_n^T B_n (6 x 6) at the owned displacement q from X0 (positions X0 + q, either
-        frame): the director's mass W^T (.) W. Collective."""
-        Bn = self.normal(self.gradients(self.x0 + q))[4]
-        return self.pi * (Bn.T @ Bn)
-
-    def moving(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Take the configuration (q, v) (inertial, owned entries): its mass for
-        :meth:`mass_apply` and :meth:`woodbury`; returns the velocity part of the inertia
-        force, Pi_XX B_n^T k (6,), which the equations carry on the left. Collective."""
-        part = np.stack([(self.x0 + q).reshape(-1, 3)[self.nodes],
-                         v.reshape(-1, 3)[self.nodes]], axis=1)          # (nodes, 2, 3)
-        both = self.model.comm.allreduce(np.tensordot(self.G, part, axes=(0, 0)))  # (2, 2, 3)
-        g, rate = both[:, 0], both[:, 1]
-        B, n, size, Pn, Bn = self.normal(g)
-        cdot = B @ rate.reshape(-1)
-        ndot = Pn @ cdot / size
-        k = (2.0 * cross(rate[0], rate[1]) - 2.0 * ndot * float(n @ cdot)) / size
-        self._C = self.pi * (Bn.T @ Bn)
-        # d(B_n^T k)/d(W v), for implicit iteration matrices (HubTangent)
-        self._Ct = self.pi * (Bn.T @ (2.0 * self.B(rate) - 2.0 * float(n @ cdot) * Bn
-                                      - 2.0 * np.outer(ndot, n @ B))) / size
-        return self.pi * (Bn.T @ k)                    # B_n^T P_n = B_n^T, B_n^T n = 0
-
-    def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
-        """out += Pi_XX J^T J x at the configuration of the last :meth:`moving`. Collective."""
-        self.add_spread(self._C @ self.gradients(x).reshape(-1), out)
-
-    def prepare(self, solve) -> None:
-        """Store Y = M0^-1 W^T (n_owned, 6) and W Y for :meth:`woodbury`; ``solve(x)`` replaces
-        an owned-entry array x by M0^-1 x (the solid's mass with TipBody's). Collective."""
-        cols = []
-        for k in range(6):
-            e = np.zeros(6)
-            e[k] = 1.0
-            x = self.spread(e)
-            solve(x)
-            cols.append(x)
-        Y = np.column_stack(cols)
-        self._WY = np.column_stack([self.gradients(c).reshape(-1) for c in cols])
-        self._rows = np.flatnonzero(np.any(Y != 0.0, axis=1))   # the face's, with a lumped M0
-        self._Y = Y[self._rows]
-
-    def woodbury(self, out: np.ndarray) -> None:
-        """out = M0^-1 r on entry, (M0 + W^T C W)^-1 r on exit, C = Pi_XX B_n^T B_n of the last
-        :meth:`moving` (push-through form, C singular allowed: x - Y (I + C W Y)^-1 C W x).
-        Collective."""
-        C = self._C
-        s = np.linalg.solve(np.eye(6) + C @ self._WY, C @ self.gradients(out).reshape(-1))
-        out[self._rows] -= self._Y @ s
-
-    # -- matrices ------------------------------------------------------------------------------------
-    def add_to(self, A: PETSc.Mat, C6: np.ndarray, *, rows: np.ndarray | None = None) -> None:
-        """A += W^T C6 W (C6 6 x 6) and assemble A; ``rows`` as in :meth:`TipBody.add_to`.
-        Collective (new nonzeros allowed)."""
-        from petsc4py import PETSc
-
-        if rows is None:
-            idx = (3 * self.global_nodes[:, None] + np.arange(3)).reshape(-1)
-        else:
-            idx = rows[(3 * self.nodes[:, None] + np.arange(3)).reshape(-1)]
-        cols = np.concatenate(self.model.comm.allgather(idx)).astype(PETSc.IntType)
-        values = sum(np.kron(np.outer(self.G[:, k], self.G_all[:, l]),
-                             C6[3 * k: 3 * k + 3, 3 * l: 3 * l + 3])
-                     for k in (0, 1) for l in (0, 1))
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         if idx.size:
             A.setValues(idx.astype(PETSc.IntType), cols, values,

@@ -12,6 +12,7 @@ import ufl
 from dolfinx import fem
 from petsc4py import PETSc
 
+from fxflex.numerics.director import FactorUpdate
 from fxflex.numerics.hub import HubFrameFactor
 from fxflex.solid import forms
 from fxflex.solid.solvers import direct_solver
@@ -102,26 +103,15 @@ class HubTangent(HubFrameFactor):
             self.A.setDiagonal(self.diag, addv=PETSc.InsertMode.ADD_VALUES)
         self.ksp.getPC().setUp()                 # the numerical factorisation, now (KSPSetUp
         #                                          would leave it to the next solve)
-        if d.director is not None:               # S_hub^-1 W^T for the director's update
-            self._mass, self._c = mass, c
-            cols = []
-            for k in range(6):
-                e = np.zeros(6)
-                e[k] = 1.0
-                self.b_arr[:] = d.director.spread(e)
-                self.ksp.solve(self.b, self.x)
-                cols.append(self.x_arr.copy())
-            self._Y = np.column_stack(cols)
-            self._WY = np.column_stack([d.director.gradients(y).reshape(-1) for y in cols])
+        if d.director is not None:               # the director's part kept current
+            self._update = FactorUpdate(d.director, self._solve_copy, self._C6, mass, c)
+
+    def _solve_copy(self, b: np.ndarray) -> np.ndarray:
+        self.b_arr[:] = b
+        self.ksp.solve(self.b, self.x)
+        return self.x_arr.copy()
 
     def solve_hub(self) -> None:
         self.ksp.solve(self.b, self.x)
-        director = self.d.director
-        if director is not None:
-            # the director's part of S at the state of the last force() (its mass, and
-            # c d(force)/dq'), turned into the hub frame, replaces the factor's: Woodbury
-            R6 = np.kron(np.eye(2), self._rotation)
-            now = self._mass * director._C + self._c * director._Ct
-            dC = R6.T @ now @ R6 - self._C6
-            w = director.gradients(self.x_arr).reshape(-1)
-            self.x_arr -= self._Y @ np.linalg.solve(np.eye(6) + dC @ self._WY, dC @ w)
+        if self.d.director is not None:          # its mass and c d(force)/dq' at the last
+            self._update.correct(self.x_arr, self._rotation)   # force(), in the hub frame
