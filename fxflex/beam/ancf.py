@@ -38,6 +38,7 @@ from fxflex.beam.invariants import GramChain
 from fxflex.beam.line import beam_line, twist_check
 from fxflex.formulation import FORCE_EVAL, BuildOptions, FormulationBase, SteadyState
 from fxflex.numerics.dense import DenseLU, newton, omega_max
+from fxflex.numerics.director import FactorUpdate
 from fxflex.numerics.hub import HubFrameFactor
 from fxflex.numerics.qep import DenseLinearisation
 from fxflex.numerics.sparse import SparseAdd
@@ -45,7 +46,7 @@ from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3, rotation_z
 
 __all__ = ["build", "dof_count", "ANCF", "constrained_slots", "QUADRATURE", "elasticity_matrix",
-           "reference_coordinates", "tip_mass_block"]
+           "reference_coordinates", "tip_mass_block", "tip_director"]
 
 
 def constrained_slots(scene: Scene) -> tuple[int, ...]:
@@ -58,18 +59,47 @@ def tip_mass_block(scene: Scene, e0_tip: np.ndarray) -> np.ndarray:
     section 10): a rigid body at the tip centroid r whose point at offset rho (undeformed, O-XYZ)
     follows the tip section's affine motion x = r + [d_X, d_Y~, d_Z~] J0^-1 rho (J0 the same
     gradients at e0), so its kinetic energy 1/2 m |r'|^2 + 1/2 sum_ab K_ab d_a' . d_b' is one of
-    the scalar form M_s (x) I_3 with K = J0^-1 Pi J0^-T (Pi = int rho rho^T dm,
-    :meth:`fxflex.scene.schema.TipMass.second_moments`): m on the position slot, K on the three
-    first-order gradients; the second-order ones carry none. For a rigid turn of the section,
-    J = A J0 with A' = [w]x A, this is 1/2 w^T (A J_tip A^T) w: the rotary inertia exactly; the
-    Coriolis and centrifugal terms follow from M_s as for the beam's own mass."""
+    the scalar form M_s (x) I_3 with K = J0^-1 Pi' J0^-T (Pi = int rho rho^T dm,
+    :meth:`fxflex.scene.schema.TipMass.second_moments`; Pi' without Pi_XX, which
+    :func:`tip_director` carries on the section's normal): m on the position slot, K on the
+    three first-order gradients; the second-order ones carry none. For a rigid turn of the
+    section, J = A J0 with A' = [w]x A, this and the director's share are 1/2 w^T (A J_tip A^T)
+    w: the rotary inertia exactly; the Coriolis and centrifugal terms follow from M_s as for the
+    beam's own mass."""
     tip = scene.tip_mass
     J0 = e0_tip[1:4].T                                   # columns d_X, d_Y~, d_Z~
     Jinv = np.linalg.inv(J0)
+    Pi = tip.second_moments()
+    Pi[0, 0] = 0.0                                       # Pi_XX: tip_director
     out = np.zeros((SLOTS, SLOTS))
     out[0, 0] = tip.mass
-    out[1:4, 1:4] = Jinv @ tip.second_moments() @ Jinv.T
+    out[1:4, 1:4] = Jinv @ Pi @ Jinv.T
     return out
+
+
+def tip_director(scene: Scene, e0_tip: np.ndarray, free: np.ndarray):
+    """The tip body's Pi_XX on the tip section's normal (:class:`fxflex.numerics.director.
+    Director`), on the free coordinates, or None for a body flat in the section plane. Its X
+    axis is n = g_Y x g_Z / |g_Y x g_Z| with [g_X, g_Y, g_Z] = [d_X, d_Y~, d_Z~] J0^-1 (the
+    section's affine motion of :func:`tip_mass_block`), so a shear of the tip element (d_X
+    tilting against the section) does not turn the body: Pi_XX on d_X instead, as before,
+    made a rod along X [0, J, J] act on the free end's shear strain rate (2nd lead-lag 177.9 Hz
+    against 231.4 with the disc [2 J, J, J] of the same J_Z, uniform 0.12 x 0.06 m beam, 10
+    elements) and its centrifugal pull, along d_X, stretch the tip (2 % of the steady stretch
+    at 3000 rpm). The tip node's slots are the last SLOTS, all free."""
+    from mpi4py import MPI
+
+    from fxflex.numerics.director import Director
+    from fxflex.scene.load import tip_body_is_flat
+
+    tip = scene.tip_mass
+    if tip_body_is_flat(tip.inertia):
+        return None
+    Jinv = np.linalg.inv(e0_tip[1:4].T)
+    last = free[-1] - SLOTS + 1                          # the tip node's first slot
+    slots = np.searchsorted(free, last + np.arange(1, 4))  # d_X, d_Y~, d_Z~ among the free
+    return Director(MPI.COMM_SELF, 3 * len(free), slots, Jinv[:, 1:3],
+                    float(tip.second_moments()[0, 0]), np.zeros(3 * len(free)))
 
 
 class ANCF(FormulationBase):
@@ -139,6 +169,9 @@ class ANCF(FormulationBase):
         Minv = np.linalg.inv(Mff)
         self.Minv = 0.5 * (Minv + Minv.T)
         self.Mfc = Ms[np.ix_(self.free, self.con)]
+        self.director = tip_director(scene, self.e0n[-1], self.free)
+        if self.director is not None:            # Pi_XX: a Woodbury update of M_ff^-1
+            self.director.prepare(self._minv_solve)
         self.timings["factorise"] = time.perf_counter() - t1
         # work arrays (the time loop allocates nothing)
         n = self.n_full
@@ -150,6 +183,7 @@ class ANCF(FormulationBase):
         self._rhs = np.zeros((len(self.free), 3))
         self._xf, self._mfx = np.zeros((len(self.free), 3)), np.zeros((len(self.free), 3))
         self._factor: HubFrameLU | None = None
+        self._qf, self._vf, self._df = (np.zeros(len(self.free_dofs)) for _ in range(3))
         self._afree = np.zeros((len(self.free), 3))
         self._col = np.zeros(self.n_slots)
         self._A = np.eye(3)
@@ -160,6 +194,10 @@ class ANCF(FormulationBase):
         self._rotate(0.0)
         self._steady: SteadyState | None = None
         self._omega_max: float | None = None
+
+    def _minv_solve(self, x: np.ndarray) -> None:
+        """x <- M_ff^-1 x on the free coordinates (M_s (x) I_3 with the flat tip block)."""
+        x[:] = (self.Minv @ x.reshape(-1, 3)).reshape(-1)
 
     # ------------------------------------------------------------------ drive
     def _rotate(self, phi: float) -> np.ndarray:
@@ -206,6 +244,8 @@ class ANCF(FormulationBase):
         acceleration (phi'' S - phi'^2 P) A e0 on the root's constrained ones."""
         rhs = self._free_force(t, q, v)
         np.matmul(self.Minv, rhs, out=self._afree)
+        if self.director is not None:            # its mass J^T J at q: Woodbury
+            self.director.woodbury(self._afree.reshape(-1))
         out3 = out.reshape(-1, 3)
         nr = len(self.root_free)
         out3[self.con] = self._acon
@@ -253,6 +293,15 @@ class ANCF(FormulationBase):
         if not self.at_rest:                     # its inertia load on the free coordinates
             np.matmul(self.Mfc, self._acon, out=self._mfa)
             rhs -= self._mfa
+        if self.director is not None:            # Pi_XX: velocity force, mass at q, damping
+            director = self.director
+            np.take(q, self.free_dofs, out=self._qf, mode="clip")
+            np.take(v, self.free_dofs, out=self._vf, mode="clip")
+            flat = rhs.reshape(-1)
+            director.add_spread(director.moving(self._qf, self._vf), flat, -1.0)
+            if self.c_rho:
+                np.take(d, self.free_dofs, out=self._df, mode="clip")
+                director.mass_apply(self._df, flat, -self.c_rho)
         return rhs
 
     # ------------------------------------------------------------------ implicit integration
@@ -264,9 +313,12 @@ class ANCF(FormulationBase):
         out[self.free_dofs] = rhs.reshape(-1)
 
     def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
-        """M_ff x_f with M = M_s (x) I_3 (Eq. 54)."""
+        """M_ff x_f with M = M_s (x) I_3 (Eq. 54); a tip body's Pi_XX adds its J^T J at the q of
+        the last ``force`` call."""
         np.take(x, self.free_dofs, out=self._xf.reshape(-1), mode="clip")
         np.matmul(self.Mff, self._xf, out=self._mfx)
+        if self.director is not None:            # J^T J at the q of the last force()
+            self.director.mass_apply(self._xf.reshape(-1), self._mfx.reshape(-1))
         out[self.con_dofs] = 0.0
         out[self.free_dofs] = self._mfx.reshape(-1)
 
@@ -290,9 +342,22 @@ class ANCF(FormulationBase):
         K += (m + c * self.c_rho) * np.kron(self.Ms, np.eye(3))
         if self._factor is None:
             self._factor = HubFrameLU(self.free_dofs, self.n_full, self.drive)
-        self._factor.lu.matrix[...] = K[np.ix_(self.free_dofs, self.free_dofs)]
-        self._factor.lu.factor()
+        lu = self._factor.lu
+        lu.matrix[...] = K[np.ix_(self.free_dofs, self.free_dofs)]
+        director = self.director
+        if director is not None:                 # Pi_XX J^T J at the hub-frame coordinates
+            C6 = (m + c * self.c_rho) * director.mass6(e_hub[self.free_dofs])
+            director.add_dense(lu.matrix, C6)
+        lu.factor()
+        if director is not None:                 # kept current while the factor serves
+            self._factor.update = FactorUpdate(director, self._lu_solve, C6,
+                                               m + c * self.c_rho, c)
         return self._factor
+
+    def _lu_solve(self, b: np.ndarray) -> np.ndarray:
+        x = np.zeros_like(b)
+        self._factor.lu.solve_into(b, x)
+        return x
 
     def tip(self, t: float, q: np.ndarray) -> np.ndarray:
         """U = A^T x_tip - x0_tip: the rigid rotation removed (SPEC section 2)."""
@@ -345,7 +410,15 @@ class ANCF(FormulationBase):
             r += self.c_rho * rate * (self.Ms @ ((e3 - self.e0n.reshape(-1, 3)) @ S3.T)).reshape(-1)
         r -= s * self.fq
         r[self.tip_dofs] -= s * self.Ftip
-        return r[self.free_dofs]
+        r = r[self.free_dofs]
+        if self.director is not None:            # -Omega^2 Pi_XX J^T P n [+ circulatory]
+            self.director.add_spread(self._director_terms(x, rate)[1], r)
+        return r
+
+    def _director_terms(self, x: np.ndarray, rate: float):
+        """(B_n, f6, K6) of the tip body's Pi_XX at the free coordinates x and speed ``rate``
+        (:meth:`fxflex.numerics.director.Director.rotating`)."""
+        return self.director.rotating(x, rate**2, self.c_rho * rate if self.absolute else 0.0)
 
     def tangent_stiffness(self, e: np.ndarray) -> np.ndarray:
         """dQ_k/de (dense, all coordinates)."""
@@ -355,7 +428,10 @@ class ANCF(FormulationBase):
         K = self.tangent_stiffness(e) - rate**2 * np.kron(self.Ms, P3)
         if self.absolute:
             K += self.c_rho * rate * np.kron(self.Ms, S3)
-        return K[np.ix_(self.free_dofs, self.free_dofs)]
+        K = K[np.ix_(self.free_dofs, self.free_dofs)]
+        if self.director is not None:
+            self.director.add_dense(K, self._director_terms(e[self.free_dofs], rate)[2])
+        return K
 
     def steady_state(self) -> SteadyState:
         """Rotating-frame equilibrium at the final speed by Newton (speed continuation if the
@@ -378,12 +454,19 @@ class ANCF(FormulationBase):
 
     def linearise(self, steady: SteadyState | None = None) -> DenseLinearisation:
         """(M, C, K) about the steady state in the rotating frame, free coordinates: C = 2 Omega
-        M S + c/rho M, K = K_T(e*) - Omega^2 M P [+ c/rho Omega M S, absolute model]."""
+        M S + c/rho M, K = K_T(e*) - Omega^2 M P [+ c/rho Omega M S, absolute model]; a tip
+        body's Pi_XX adds J^T J to M, 2 Omega J^T S J to C and its steady derivative to K."""
         e = (steady or self.steady_state()).q
         omega = self.scene.rotation.omega
         f = np.ix_(self.free_dofs, self.free_dofs)
         M = np.kron(self.Ms, np.eye(3))[f]
-        C = 2 * omega * np.kron(self.Ms, S3)[f] + self.c_rho * M
+        C = 2 * omega * np.kron(self.Ms, S3)[f]
+        if self.director is not None:            # J^T J, 2 Omega J^T S J at the equilibrium
+            Bn = self._director_terms(e[self.free_dofs], omega)[0]
+            pi = self.director.pi
+            self.director.add_dense(M, pi * (Bn.T @ Bn))
+            self.director.add_dense(C, 2 * omega * pi * (Bn.T @ S3 @ Bn))
+        C += self.c_rho * M
         return DenseLinearisation(M, C, self._effective_stiffness(e, omega))
 
     def mode_tip(self, X: np.ndarray) -> np.ndarray:
@@ -443,12 +526,15 @@ class HubFrameLU(HubFrameFactor):
         super().__init__(drive, self._w, self._w)
         self.free_dofs = free_dofs
         self.lu = DenseLU(len(free_dofs))
+        self.update = None                       # fxflex.numerics.director.FactorUpdate
         self._b, self._x = np.zeros(len(free_dofs)), np.zeros(len(free_dofs))
 
     def solve_hub(self) -> None:
         w = self._w
         np.take(w, self.free_dofs, out=self._b, mode="clip")
         self.lu.solve_into(self._b, self._x)
+        if self.update is not None:              # a tip body's Pi_XX, at the last force()
+            self.update.correct(self._x, self._rotation)
         w.fill(0.0)
         w[self.free_dofs] = self._x
 

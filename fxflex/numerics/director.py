@@ -114,10 +114,13 @@ class Director:
     @classmethod
     def normal(cls, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, np.ndarray,
                                              np.ndarray]:
-        """(B, n, |c|, P_n, B_n) at g = W y (class docstring)."""
+        """(B, n, |c|, P_n, B_n) at g = W y (class docstring); n = 0 and B_n = 0 where g_Y, g_Z
+        span no plane (c = 0: a state of all-zero coordinates, which Newton's scale asks for)."""
         B = cls.B(g)
         c = cross(g[0], g[1])
         size = float(np.linalg.norm(c))
+        if size == 0.0:                  # no plane (ANCF's all-zero coordinates): no director
+            return B, np.zeros(3), 1.0, np.eye(3), np.zeros((3, 6))
         n = c / size
         Pn = np.eye(3) - np.outer(n, n)
         return B, n, size, Pn, Pn @ B / size
@@ -181,9 +184,10 @@ class Director:
                                       - 2.0 * np.outer(ndot, n @ B))) / size
         return self.pi * (Bn.T @ k)                    # B_n^T P_n = B_n^T, B_n^T n = 0
 
-    def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
-        """out += Pi_XX J^T J x at the configuration of the last :meth:`moving`. Collective."""
-        self.add_spread(self._C @ self.gradients(x).reshape(-1), out)
+    def mass_apply(self, x: np.ndarray, out: np.ndarray, scale: float = 1.0) -> None:
+        """out += scale Pi_XX J^T J x at the configuration of the last :meth:`moving`.
+        Collective."""
+        self.add_spread(self._C @ self.gradients(x).reshape(-1), out, scale)
 
     def prepare(self, solve) -> None:
         """Store Y = M0^-1 W^T (n, 6) and W Y for :meth:`woodbury`; ``solve(x)`` replaces a state
@@ -210,6 +214,17 @@ class Director:
         out[self._rows] -= self._Y @ s
 
     # -- matrices ------------------------------------------------------------------------------------
+    def _block(self, C6: np.ndarray, G_cols: np.ndarray) -> np.ndarray:
+        """W^T C6 W on (this rank's slots) x (the slots of G_cols), 3 x 3 blocks."""
+        return sum(np.kron(np.outer(self.G[:, k], G_cols[:, l]),
+                           C6[3 * k: 3 * k + 3, 3 * l: 3 * l + 3])
+                   for k in (0, 1) for l in (0, 1))
+
+    def add_dense(self, A: np.ndarray, C6: np.ndarray) -> None:
+        """A += W^T C6 W for a dense A on the state's layout (one rank)."""
+        idx = (3 * self.nodes[:, None] + np.arange(3)).reshape(-1)
+        A[np.ix_(idx, idx)] += self._block(C6, self.G)
+
     def add_to(self, A: PETSc.Mat, C6: np.ndarray, *, rows: np.ndarray | None = None) -> None:
         """A += W^T C6 W (C6 6 x 6) and assemble A: ``rows`` the global row of each entry of the
         state (a matrix on another layout, TLF's free coordinates), default 3 * global slot +
@@ -221,9 +236,7 @@ class Director:
         else:
             idx = rows[(3 * self.nodes[:, None] + np.arange(3)).reshape(-1)]
         cols = np.concatenate(self.comm.allgather(idx)).astype(PETSc.IntType)
-        values = sum(np.kron(np.outer(self.G[:, k], self.G_all[:, l]),
-                             C6[3 * k: 3 * k + 3, 3 * l: 3 * l + 3])
-                     for k in (0, 1) for l in (0, 1))
+        values = self._block(C6, self.G_all)
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         if idx.size:
             A.setValues(idx.astype(PETSc.IntType), cols, values,
