@@ -35,7 +35,6 @@ import numpy as np
 from mpi4py import MPI
 
 from fxflex import cache
-from fxflex.errors import FxflexError
 
 if TYPE_CHECKING:                   # a cache hit needs neither PETSc nor dolfinx: imported on use
     from petsc4py import PETSc
@@ -76,19 +75,19 @@ class ClampedModes:
 
 def mass_and_stiffness(model: SolidModel) -> tuple[PETSc.Mat, PETSc.Mat]:
     """(K_L, M) assembled with the root clamp: 1 on K_L's clamped diagonal, 0 on M's. M holds
-    the [tip_mass] (:mod:`fxflex.solid.tip_mass`: mu (x) I_3 on the tip nodes), so the
-    clamped modes are those of the solid with its tip body."""
+    the [tip_mass] (:mod:`fxflex.solid.tip_mass`: mu (x) I_3 on the tip nodes, and a body's
+    Pi_XX J^T J at the reference, FFRF's linearised director), so the clamped modes are those
+    of the solid with its tip body."""
     from fxflex.solid.tip_mass import tip_body
 
     K = model.matrix(model.compile(model.stiffness_form()))
     M = model.matrix(model.compile(model.mass_form()), diagonal=0.0)
     body = tip_body(model)
     if body is not None:
-        if body.director is not None:   # refused by validate_for before this
-            raise FxflexError("tip_mass.inertia: the floating frame carries a tip body flat in "
-                              "the tip section plane; allowed: J_X = J_Y + J_Z, or tlf, lebb, "
-                              "nebb, ancf")
         body.add_to(M)
+        d = body.director
+        if d is not None:               # Pi_XX, FFRF's director linearised at the reference
+            d.add_to(M, d.mass6(np.zeros(model.n_owned)))
     return K, M
 
 

@@ -39,8 +39,9 @@ import numpy as np
 from fxflex.formulation import BuildOptions
 from fxflex.scene import Scene
 from fxflex.scene.kinematics import P3, S3
-from fxflex.solid.reduction import (MeshData, ReducedFormulation, RotatingSystem, inner, mat_apply,
-                                  nodal, reduced_key, tip_rows)
+from fxflex.solid.reduction import (MeshData, ReducedFormulation, RotatingSystem,
+                                  director_corrections, inner, mat_apply, nodal, reduced_key,
+                                  tip_rows)
 
 if TYPE_CHECKING:                   # a cache hit needs neither dolfinx nor SLEPc: imported on use
     from fxflex.solid.cms import ClampedModes
@@ -73,13 +74,18 @@ class FFRFInvariants:
 def ffrf_invariants(model: SolidModel, data: MeshData, Phi: np.ndarray) -> FFRFInvariants:
     """Project the mesh integrals on the modes Phi (n_owned, m); collective on model.comm.
 
-    M commutes with the nodal 3x3 operators, so int rho Phi^T B Phi = (M Phi)^T (B_d Phi).
+    M commutes with the nodal 3x3 operators, so int rho Phi^T B Phi = (M Phi)^T (B_d Phi); a
+    tip body's Pi_XX does not, and :func:`director_corrections` mends its share.
     """
     comm = model.comm
     MPhi = mat_apply(data.M, Phi)
     Lam = inner(comm, Phi, mat_apply(data.K, Phi))
-    G = inner(comm, MPhi, nodal(S3, Phi))
-    N = inner(comm, MPhi, nodal(P3, Phi))
+    SPhi, PPhi = nodal(S3, Phi), nodal(P3, Phi)
+    G = inner(comm, MPhi, SPhi)
+    N = inner(comm, MPhi, PPhi)
+    fix = director_corrections(data, Phi, [(S3, SPhi), (P3, PPhi)])  # a tip body's Pi_XX
+    if fix:
+        G, N = G + fix[0], N + fix[1]
     return FFRFInvariants(
         Lambda=0.5 * (Lam + Lam.T), G=0.5 * (G - G.T), N=0.5 * (N + N.T),
         g=inner(comm, Phi, data.f_S), n=inner(comm, Phi, data.f_c), fe=inner(comm, Phi, data.F),

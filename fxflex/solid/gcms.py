@@ -190,6 +190,8 @@ class GCMS(ReducedFormulation):
         if n_global % 3:
             raise FxflexError(f"reduction.gcms_modes: must be a multiple of 3 (the global modes "
                               f"are [G1d Phi, G2d Phi, G3d Phi]), got {n_global}")
+        from fxflex.scene.load import check_tip_body
+        check_tip_body("gcms", scene)      # a tip body with extent along X: refused, one line
         t0 = time.perf_counter()
         tol = scene.reduction.gcms_gram_tol
         cached = self._use(n_global // 3, model, data, modes)

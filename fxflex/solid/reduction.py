@@ -62,6 +62,7 @@ if TYPE_CHECKING:                   # a cache hit needs neither PETSc nor dolfin
     from fxflex.solid.model import SolidModel
 
 __all__ = ["nodal", "mat_apply", "inner", "tip_rows", "MeshData", "mesh_data",
+           "director_corrections",
            "AffineStack", "RotatingSystem", "ReducedFormulation",
            "rotation_weights", "ab2_root", "reduced_key", "load_reduced", "save_reduced"]
 
@@ -110,6 +111,9 @@ class MeshData:
     J0: float                   # int rho X0^T P X0: rigid moment of inertia about z
     load_torque: float          # sum over nodes of (S X0) . F: torque of F about z, undeformed
     timings: dict = field(default_factory=dict)
+    #: a tip body's Pi_XX (FFRF: its director linearised at the reference, in M above and in
+    #: the loads; :func:`director_corrections` for the invariants that M alone would get wrong)
+    director: object = None
 
 
 def mesh_data(model: SolidModel) -> MeshData:
@@ -131,14 +135,41 @@ def mesh_data(model: SolidModel) -> MeshData:
     J0 = model.comm.allreduce(fem.assemble_scalar(fem.form(
         model.rho * ufl.inner(ufl.dot(ufl.as_matrix(P3.tolist()), X0), X0) * model.dx)))
     body = tip_body(model)
+    director = None
     if body is not None:                 # the tip body's rigid-rotation terms (tip_mass.py)
         f_c += body.load(P3)
         f_S += body.load(S3)
         J0 += body.second_moment(P3)
+        director = body.director
+        if director is not None:         # Pi_XX: n0 = e_X, n = n0 + J u (FFRF, linearised)
+            Bn = director.normal(director.gradients(director.x0))[4]
+            for B, f in ((P3, f_c), (S3, f_S)):
+                director.add_spread(director.pi * (Bn.T @ (B @ np.array([1.0, 0.0, 0.0]))), f)
+            J0 += director.pi * P3[0, 0]
     xyz = model.node_coordinates()
     load_torque = model.comm.allreduce(float(np.sum((xyz @ S3.T) * F.reshape(-1, 3))))
     return MeshData(K=K, M=M, f_c=f_c, f_S=f_S, F=F, J0=float(J0), load_torque=load_torque,
-                    timings={"assemble": time.perf_counter() - t0})
+                    timings={"assemble": time.perf_counter() - t0}, director=director)
+
+
+def director_corrections(data: MeshData, Phi: np.ndarray, BPhi: list) -> list:
+    """For a tip body's Pi_XX on the FFRF (:class:`fxflex.numerics.director.Director`,
+    linearised at the reference: n = e_X + J u, J = B_n0 W): M holds Pi_XX J^T J, so
+    (M Phi)^T (B_d Phi) carries Pi_XX (J Phi)^T J B_d Phi where the body's coupling is
+    Pi_XX (J Phi)^T B (J Phi) (the director does not commute with B_d: J B_d != B J). Returns
+    the difference to add for each (B, B_d Phi) of ``BPhi``, (m, m) each; [] without one.
+    Collective."""
+    d = data.director
+    if d is None:
+        return []
+    Bn = d.normal(d.gradients(d.x0))[4]
+
+    def J(X: np.ndarray) -> np.ndarray:            # (3, m)
+        part = X.reshape(-1, 3, X.shape[1])[d.nodes]
+        return Bn @ d.comm.allreduce(np.einsum("ak,aim->kim", d.G, part)).reshape(6, -1)
+
+    JPhi = J(Phi)
+    return [d.pi * (JPhi.T @ B @ JPhi - JPhi.T @ J(BdPhi)) for B, BdPhi in BPhi]
 
 
 # -- cache of the projections ---------------------------------------------------------------------

@@ -23,8 +23,10 @@ the mesh is refined, measured from 189 to 73 Hz between 40 and 320 layers. A sca
 node pair cannot tell a rotation from a strain there.) The rest, Pi_XX, TLF carries on the
 face's unit normal n = g_Y x g_Z / |g_Y x g_Z| (:class:`fxflex.numerics.director.Director`, on
 the columns G below: a mass that depends on the configuration, exact for every rigid motion of
-the face); FFRF and GCMS, whose reductions rest on the constant isotropic mass below, refuse it
-with one line (:func:`fxflex.scene.load.validate_for`).
+the face) and FFRF on that normal linearised at the reference (a constant, non-isotropic mass:
+:func:`fxflex.solid.reduction.director_corrections`); GCMS, whose absolute coordinates would
+see that mass turn with the hub, refuses it with one line
+(:func:`fxflex.scene.load.check_tip_body`).
 
 Then for any rigid motion of the face, v_a = v_c + omega x r_a' (r_a' = A r_a, any rotation A,
 not only a small one), the kinetic energy 1/2 sum mu_ab v_a . v_b is

@@ -98,22 +98,24 @@ def test_the_body_is_rigid_for_any_rotation():
 
 
 def test_a_body_with_extent_along_x_is_refused_and_a_flat_one_needs_no_layer_behind():
-    """The floating-frame solids carry the body on the tip face: one flat in the tip plane
-    (J_X = J_Y + J_Z, decimals as typed) builds even on a Q1 mesh of one element layer; one
-    with extent along X ([J, J, J]) is refused by FFRF and GCMS with one line naming what is
-    allowed, and taken by TLF (its director n, tip_mass.Director)."""
+    """The solids carry the body on the tip face: one flat in the tip plane (J_X = J_Y + J_Z,
+    decimals as typed) builds even on a Q1 mesh of one element layer; one with extent along X
+    ([J, J, J]) is refused by GCMS with one line naming what is allowed (at build too), and
+    taken by TLF and FFRF (the face's normal, numerics.director.Director)."""
     sc = load_scene(overrides=["mesh.solid=[1,2,2]", "reduction.ffrf_modes=6", "tip_mass.mass=1",
                                "tip_mass.inertia=[0.3, 0.1, 0.2]"])
     validate_for("ffrf", sc)
     modes_of(build("ffrf", sc, COMM, BuildOptions()), 3)
     sphere = sc.replace(**{"tip_mass.inertia": (0.1, 0.1, 0.1)})
-    for method in ("ffrf", "gcms"):
-        with pytest.raises(SceneError) as err:
-            validate_for(method, sphere)
-        text = str(err.value)
-        assert text.startswith("tip_mass.inertia") and "J_X = J_Y + J_Z" in text
-        assert "tlf" in text and "\n" not in text
+    with pytest.raises(SceneError) as err:
+        validate_for("gcms", sphere)
+    text = str(err.value)
+    assert text.startswith("tip_mass.inertia") and "J_X = J_Y + J_Z" in text
+    assert "ffrf, tlf" in text and "\n" not in text
+    with pytest.raises(SceneError):                    # a direct build too
+        build("gcms", sphere, COMM, BuildOptions())
     validate_for("tlf", sphere)
+    validate_for("ffrf", sphere)
 
 
 def _director_model(inertia=(0.02, 0.03, 0.025)):
@@ -552,3 +554,70 @@ def test_the_iteration_matrix_keeps_the_rods_mass_current():
     print(f"\nrod: fresh {fresh:.2e}, 0.5 ms old {stale:.2e} (no inertia {bare:.2e})")
     assert fresh < 1e-4
     assert stale < 1.1 * bare
+
+
+@pytest.mark.parametrize("inertia", [(0.0, 0.05, 0.05), (0.02, 0.03, 0.025)])
+def test_ffrf_invariants_carry_the_linearised_director(inertia):
+    """FFRF's invariants with a tip body of extent along X against the sums they stand for:
+    the solid and the flat part of the body (mass M_flat, isotropic) plus the director
+    linearised at the reference, n = e_X + J u (J = dn/dy of numerics.director.Director at X0):
+    the modal mass I = Phi^T M_flat Phi + Pi_XX (J Phi)^T (J Phi) (the clamped modes see the
+    director), G = Phi^T M_flat S_d Phi + Pi_XX (J Phi)^T S (J Phi) and N likewise with P
+    (reduction.director_corrections: J does not commute with S_d, P_d), the Euler load g gains
+    Pi_XX (J Phi)^T S e_X over the solid's and flat body's own, J0 gains Pi_XX. To 1e-10 of the
+    largest entry (round-off; eigen tolerance 1e-12)."""
+    from fxflex.scene.kinematics import P3, S3
+    from fxflex.solid.reduction import inner, mat_apply, nodal
+    from fxflex.solid.tip_mass import TipBody
+
+    form = build("ffrf", _uniform(3.0, inertia, 0.0), COMM, BuildOptions())
+    model, data, inv = form.model, form.data, form.inv
+    d = data.director
+    Phi = form.modes.vectors[:, : form.dof]
+    body = TipBody(model)
+    M_flat = model.matrix(model.compile(model.mass_form()), diagonal=0.0)
+    body.add_to(M_flat)
+    Bn = d.normal(d.gradients(d.x0))[4]
+    part = Phi.reshape(-1, 3, Phi.shape[1])[d.nodes]
+    JPhi = Bn @ COMM.allreduce(np.einsum("ak,aim->kim", d.G, part)).reshape(6, -1)
+
+    def close(a, b):
+        assert np.abs(a - b).max() <= 1e-10 * max(np.abs(b).max(), 1.0)
+
+    close(inner(COMM, Phi, mat_apply(M_flat, Phi)) + d.pi * JPhi.T @ JPhi, np.eye(form.dof))
+    for B, got in ((S3, inv.G), (P3, inv.N)):
+        want = inner(COMM, Phi, mat_apply(M_flat, nodal(B, Phi))) + d.pi * JPhi.T @ B @ JPhi
+        close(got, 0.5 * (want + (want.T if B is P3 else -want.T)))
+    n = model.node_coordinates().shape[0] * 3
+    f_S = model.vector(model.euler_form()).getArray(readonly=True)[:n] + body.load(S3)
+    close(inv.g, inner(COMM, Phi, f_S) + d.pi * JPhi.T @ S3 @ np.array([1.0, 0.0, 0.0]))
+    point = build("ffrf", _uniform(3.0, (0.0, 0.0, 0.0), 0.0), COMM, BuildOptions())
+    pi_xx, pi_yy = (0.5 * sum(inertia) - j for j in inertia[:2])
+    assert d.pi == pytest.approx(pi_xx, rel=1e-12)
+    # J0 = int rho X0^T P X0 + m (R + L)^2 + tr(P Pi): the body's Pi_YY (flat) and Pi_XX
+    assert inv.J0 - point.inv.J0 == pytest.approx(pi_xx + pi_yy, rel=1e-10)
+
+
+def test_ffrf_rod_along_x_as_lebb():
+    """FFRF's director is linear (n = e_X + J u), as LEBB's point terms for Pi_XX: at rest the rod
+    along X [0, P, P] has the disc's [2 P, P, P] bending frequencies (to 1e-6); at 3000 rpm its
+    share of the rotating flap and lead-lag frequencies (against rest) is LEBB's within the
+    pair's own flap / lead-lag gap at rest (measured: flap 0.99997 vs 0.99997, lead-lag 0.97295
+    vs 0.97259 against gaps 0.6 % / 0.05 %). The linear theory keeps only the linear share of
+    the rod's centrifugal terms: it softens lead-lag by -Omega^2 P (the linearised n leaves the
+    unit sphere) and leaves flap alone, where TLF and NEBB, exact in the rotation, have no
+    lead-lag effect and the propeller stiffening (shares 1.002 and 1.040)."""
+    P = 0.02 * BAR
+    f = {}
+    for m, extra in (("ffrf", ()), ("lebb", BEAM_SV)):
+        for J in ((0, 0, 0), (0, P, P), (2 * P, P, P)):
+            for rpm in (0.0, 3000.0):
+                f[m, J, rpm] = _first(m, _uniform(0.0, J, rpm, *extra))
+    for fam in ("out-of-plane", "in-plane"):
+        assert f["ffrf", (0, P, P), 0.0][fam] == pytest.approx(f["ffrf", (2 * P, P, P), 0.0][fam],
+                                                               rel=1e-6)
+        gap = abs(f["ffrf", (0, 0, 0), 0.0][fam] / f["lebb", (0, 0, 0), 0.0][fam] - 1.0)
+        share = {m: (f[m, (0, P, P), 3000.0][fam] / f[m, (0, 0, 0), 3000.0][fam])
+                 / (f[m, (0, P, P), 0.0][fam] / f[m, (0, 0, 0), 0.0][fam]) for m in ("ffrf", "lebb")}
+        print(f"\n{fam}: shares ffrf {share['ffrf']:.5f} lebb {share['lebb']:.5f}, gap {gap:.2e}")
+        assert abs(share["ffrf"] / share["lebb"] - 1.0) < max(gap, 1e-4)
