@@ -115,16 +115,24 @@ _PENDING: contextvars.ContextVar[list[tuple[Path, Path]] | None] = contextvars.C
     "fxflex_cache_pending", default=None)
 
 
+#: the cache roots this process has swept (:func:`deferred`)
+_SWEPT: set[Path] = set()
+
+
 @contextlib.contextmanager
 def deferred():
     """``with deferred():`` -- entries published inside the block appear only if it ends without
     an exception; otherwise their temporary files are deleted and the cache is as before. A block
     opened inside another joins it (the outer block decides). Also sweeps the temporary files of
-    dead processes (:func:`sweep`) when the outermost block opens."""
+    dead processes (:func:`sweep`) when the first outermost block of this process opens (on
+    each cache root)."""
     if _PENDING.get() is not None:
         yield
         return
-    sweep()
+    root = cache_root()
+    if root not in _SWEPT:              # once per process and cache: a glob of the whole cache
+        sweep()                         # costs ~1 ms, a beam build 2-5 ms
+        _SWEPT.add(root)
     pending: list[tuple[Path, Path]] = []
     token = _PENDING.set(pending)
     try:

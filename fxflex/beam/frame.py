@@ -175,6 +175,16 @@ def _assemble(blocks: np.ndarray, n_full: int, dpn: int) -> np.ndarray:
     return out
 
 
+def element_integral(dx: np.ndarray, N1: np.ndarray, A: np.ndarray, N2: np.ndarray
+                     ) -> np.ndarray:
+    """sum_q dx[e, q] N1[q]^T A[e, q] N2[q] (e, i, j): the element matrices of a section
+    operator A (e, q, a, b) between shape-function tables N1 (q, a, i), N2 (q, b, j), by two
+    pairwise contractions (one four-operand einsum loops over all six indices at once: 18x
+    slower on 40 elements)."""
+    T = np.einsum("eqab,qbj->eqaj", dx[:, :, None, None] * A, N2)
+    return np.einsum("qai,eqaj->eij", N1, T)
+
+
 class FloatingFrameBeam(FormulationBase):
     """LEBB (and, with a nonlinear force, NEBB) in the floating frame; see the module docstring."""
 
@@ -199,7 +209,7 @@ class FloatingFrameBeam(FormulationBase):
         X = line.hub_radius + line.xq
         # element matrices by quadrature of the section integrals (Eq. 39, 41)
         Ne = tab.N
-        integral = lambda A6: rho * np.einsum("eq,qai,eqab,qbj->eij", dx, Ne, A6, Ne)
+        integral = lambda A6: rho * element_integral(dx, Ne, A6, Ne)
         mass = lambda Q: integral(section_quadratic(Q, sec))
         vec = lambda Q: rho * np.einsum("eq,qai,eqa->ei", dx, Ne, section_linear(Q, sec, X))
         self.Me, Ge, Nme = mass(np.eye(3)), mass(S3), mass(P3)
@@ -207,8 +217,7 @@ class FloatingFrameBeam(FormulationBase):
         if second:
             Nme = Nme + integral(section_rotation_second_order(P3, sec, X))
             GSe = integral(section_rotation_second_order(S3, sec, X))
-        self.KLe = np.einsum("eq,qai,eqab,qbj->eij", dx, tab.B, section_stiffness(scene, sec),
-                             tab.B)
+        self.KLe = element_integral(dx, tab.B, section_stiffness(scene, sec), tab.B)
         fq_e = scene.load.line_load * np.einsum("eq,qi->ei", dx, Ne[:, 2, :])
         full = {"M": _assemble(self.Me, n_full, 6), "G": _assemble(Ge, n_full, 6),
                 "N": _assemble(Nme, n_full, 6), "K": _assemble(self.KLe, n_full, 6),
