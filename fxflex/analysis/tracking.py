@@ -12,7 +12,9 @@ linearisation in the coordinates of the mode vectors: the dense array of the bea
 reduced solids (FFRF, GCMS: their modal coordinates), and for TLF, whose PETSc matrices live only
 for an eigensolve, the formulation's own ``mass_apply`` (the lumped or consistent mass in use) on
 the free coordinates, the products summed over the ranks. The mass of a formulation does not
-depend on the speed, so one M serves both sides. The branches take the candidates of the
+depend on the speed (but for a TLF tip body with extent along X, whose director mass
+``mass_apply`` takes at the equilibrium of the last linearisation: a weighting, nearly the same
+at both), so one M serves both sides. The branches take the candidates of the
 assignment that maximises the sum of the MAC (``scipy.optimize.linear_sum_assignment`` on
 1 - MAC, the Hungarian method), so two branches never share a mode. Past a divergence an
 oscillating pair becomes two real roots +-a with the same shape; the growing one continues the

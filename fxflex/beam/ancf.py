@@ -98,8 +98,11 @@ def tip_director(scene: Scene, e0_tip: np.ndarray, free: np.ndarray):
     Jinv = np.linalg.inv(e0_tip[1:4].T)
     last = free[-1] - SLOTS + 1                          # the tip node's first slot
     slots = np.searchsorted(free, last + np.arange(1, 4))  # d_X, d_Y~, d_Z~ among the free
-    return Director(MPI.COMM_SELF, 3 * len(free), slots, Jinv[:, 1:3],
-                    float(tip.second_moments()[0, 0]), np.zeros(3 * len(free)))
+    n = 3 * len(free)
+    reference = np.zeros(n)
+    reference.reshape(-1, 3)[slots] = e0_tip[1:4]         # d_X, d_Y~, d_Z~ of e0
+    return Director(MPI.COMM_SELF, n, slots, Jinv[:, 1:3], float(tip.second_moments()[0, 0]),
+                    np.zeros(n), reference=reference)
 
 
 class ANCF(FormulationBase):
@@ -302,6 +305,8 @@ class ANCF(FormulationBase):
             if self.c_rho:
                 np.take(d, self.free_dofs, out=self._df, mode="clip")
                 director.mass_apply(self._df, flat, -self.c_rho)
+                if self.absolute and not self.at_rest:   # its own rate against e_X's
+                    director.add_spread(director.absolute_damping(rate, A), flat, -self.c_rho)
         return rhs
 
     # ------------------------------------------------------------------ implicit integration

@@ -72,16 +72,19 @@ class Director:
 
     Relative damping, (c/rho) times the whole mass: J y with y = u' - phi' S (x0 + u) is n' -
     phi' S n (the director's rate seen from the hub), since S (a x b) = S a x b + a x S b and
-    P_n S n = S n.
+    P_n S n = S n. Absolute damping damps n' - phi' S A e_X, the rate relative to the rigidly
+    turning e_X (steady state, linearisation); the time loops' whole-mass form damps J (q' -
+    phi' S A x0) instead, and :meth:`absolute_damping` is the difference they add.
     """
 
     def __init__(self, comm, n: int, slots: np.ndarray, G: np.ndarray, pi_xx: float,
-                 x0: np.ndarray, first: int = 0):
+                 x0: np.ndarray, first: int = 0, reference: np.ndarray | None = None):
         """``n`` entries in this rank's state arrays, 3 per slot; ``slots`` (k,) the slots that
         carry ``G`` (k, 2) = the weights of g_Y, g_Z; ``x0`` (n,) what is added to a state
         array to make positions (the solid's X0 for displacements; 0 for coordinates that are
         positions); ``first``: this rank's first global slot (matrices on the global
-        numbering). Collective."""
+        numbering); ``reference`` the state of the undeformed body (default 0: x0 itself).
+        Collective."""
         keep = np.any(G != 0.0, axis=1)
         self.comm, self.n, self.pi = comm, int(n), float(pi_xx)
         self.nodes = np.asarray(slots)[keep]
@@ -89,8 +92,11 @@ class Director:
         self.G_all = np.concatenate(comm.allgather(self.G))
         self.global_nodes = first + self.nodes
         self.x0 = np.asarray(x0, float)
-        self._C = self.mass6(np.zeros(self.n))                 # until the first moving()
+        ref = np.zeros(self.n) if reference is None else np.asarray(reference, float)
+        self.g0 = self.gradients(self.x0 + ref)                # (e_Y, e_Z) of the reference
+        self._C = self.mass6(ref)                              # until the first moving()
         self._Ct = np.zeros((6, 6))
+        self._Bn = self.normal(self.g0)[4]
 
     @classmethod
     def on_face(cls, model, G: np.ndarray, pi_xx: float) -> "Director":
@@ -179,10 +185,26 @@ class Director:
         ndot = Pn @ cdot / size
         k = (2.0 * cross(rate[0], rate[1]) - 2.0 * ndot * float(n @ cdot)) / size
         self._C = self.pi * (Bn.T @ Bn)
+        self._Bn = Bn
         # d(B_n^T k)/d(W v), for implicit iteration matrices (HubTangent)
         self._Ct = self.pi * (Bn.T @ (2.0 * self.B(rate) - 2.0 * float(n @ cdot) * Bn
                                       - 2.0 * np.outer(ndot, n @ B))) / size
         return self.pi * (Bn.T @ k)                    # B_n^T P_n = B_n^T, B_n^T n = 0
+
+    def absolute_damping(self, rate: float, A: np.ndarray) -> np.ndarray:
+        """(6,): W^T of it is what turns the time loops' absolute damping of the director,
+        (c/rho) Pi_XX J^T J (q' - phi' S A x0) (the whole mass times the nodes' rate relative to
+        the rigidly turning reference, as for the rest of the body), into the director's own,
+        (c/rho) Pi_XX J^T (n' - phi' S A e_X) (its rate relative to the rigidly turning e_X,
+        what the steady state and the linearisation damp): the difference per unit c/rho,
+        phi' Pi_XX B_n^T (J S A x0 - S A e_X), at the configuration of the last :meth:`moving`
+        (zero for a rigid motion of the reference; J S_d != S J elsewhere). Add it times
+        -c/rho to the force."""
+        from fxflex.scene.kinematics import S3
+
+        SA = S3 @ A
+        turned = np.concatenate([SA @ self.g0[0], SA @ self.g0[1]])    # W (S A x0)
+        return rate * self.pi * (self._Bn.T @ (self._Bn @ turned - SA[:, 0]))
 
     def mass_apply(self, x: np.ndarray, out: np.ndarray, scale: float = 1.0) -> None:
         """out += scale Pi_XX J^T J x at the configuration of the last :meth:`moving`.

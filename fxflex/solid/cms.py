@@ -45,7 +45,7 @@ __all__ = ["ClampedModes", "clamped_modes", "mass_and_stiffness", "modes_key", "
 
 #: modules whose source decides the modes (with the mesh key): a change makes a new cache entry
 CODE_MODULES = ("fxflex.solid.cms", "fxflex.solid.forms", "fxflex.solid.model",
-                "fxflex.solid.tip_mass",
+                "fxflex.solid.tip_mass", "fxflex.numerics.director",
                 "fxflex.scene.schema", "fxflex.scene.kinematics")
 
 

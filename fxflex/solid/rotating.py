@@ -18,7 +18,7 @@ from the hub and U* the steady state, a perturbation dU obeys
 - a [tip_mass] adds mu (x) B to each M_B (with the consistent or the lumped mass of the
   solid: the body stays rigid, :mod:`fxflex.solid.tip_mass`); its extent along X (Pi_XX) adds
   the director's J^T J to M, 2 Omega J^T S J (+ (c/rho) J^T J) to C and its steady derivative
-  to K, all at U* (:class:`fxflex.solid.tip_mass.Director`: n the unit normal of the tip
+  to K, all at U* (:class:`fxflex.numerics.director.Director`: n the unit normal of the tip
   face's fit).
 
 The root clamp is eliminated: every matrix is the sub-matrix on the free coordinates, which each

@@ -47,6 +47,7 @@ from fxflex.formulation import FORCE_EVAL, BuildOptions, FormulationBase, Steady
 from fxflex.io.fields import FieldWriter
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import rotation_z
+from fxflex.scene.load import tip_body_is_flat
 from fxflex.solid import forms
 from fxflex.solid.model import SolidModel, solid_dof_count
 from fxflex.solid.tlf_dynamics import Dynamics, axpy
@@ -189,7 +190,7 @@ class TLF(FormulationBase):
         alpha, beta, dphi, c, s = self._loads(t, q)
         rhs = d.rhs
         if d.director is not None:               # Pi_XX's quadratic-velocity force
-            d.director.add_spread(d.director.moving(q, v), rhs, -1.0)
+            self._director_force(dphi, q, v, rhs)
         if d.mass == "lumped":
             np.multiply(rhs, d.m_inv, out=out)
             if d.body is not None:               # (D + M_tip)^-1 (fxflex.solid.tip_mass)
@@ -210,6 +211,16 @@ class TLF(FormulationBase):
                 axpy(-d.c_rho, d.y, out)
         out[d.root] = d.root_combination(alpha, beta)
 
+    def _director_force(self, dphi: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """out -= a tip body's Pi_XX velocity force at (q, v) (it takes that configuration), and
+        with the absolute damping model the director's own damping against the whole-mass one
+        the loop applies (:meth:`fxflex.numerics.director.Director.absolute_damping`)."""
+        d = self.dynamics
+        director = d.director
+        director.add_spread(director.moving(q, v), out, -1.0)
+        if d.c_rho > 0.0 and not d.relative and dphi != 0.0:
+            director.add_spread(director.absolute_damping(dphi, d.A), out, -d.c_rho)
+
     # -- implicit integration (formulation.Implicit) ----------------------------------------------
     def force(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
         """F = Q_e - Q_k(u) - Q_d - M_fr u_r'' on the free rows (Eq. 35), 0 on the root. Q_d =
@@ -219,7 +230,7 @@ class TLF(FormulationBase):
         _, _, dphi, c, s = self._loads(t, q)
         out[:] = d.rhs
         if d.director is not None:               # takes (q, v): mass_apply's M(q) from here
-            d.director.add_spread(d.director.moving(q, v), out, -1.0)
+            self._director_force(dphi, q, v, out)
         if d.c_rho > 0.0:
             d.damped_rate(dphi, c, s, q, v)
             self.mass_apply(d.y, d.my)
@@ -327,6 +338,9 @@ class TLF(FormulationBase):
 
         st = steady or self.steady_state()
         sc = self.scene
+        if not tip_body_is_flat(sc.tip_mass.inertia):   # mass_apply's director mass (the
+            q = np.asarray(st.q, float)                  # MAC weights): at this equilibrium
+            self.dynamics.director.moving(q, np.zeros_like(q))
         absolute = sc.damping.model == "absolute"
         start = {} if self.sweep is None else self.sweep.eigen_start(self, absolute)
         if self.options.linear == "iterative":

@@ -2,8 +2,8 @@
 the mass of Eq. 29 (lumped row sums or the factorised consistent mass), the loads, the root-node
 data of the prescribed drive, the damped rate of Eq. 34 / 68, and the work arrays. A [tip_mass]
 joins the mass (:mod:`fxflex.solid.tip_mass`): the inertial frame needs nothing else; its extent
-along X (Pi_XX) is a configuration-dependent mass of rank 3, a Woodbury update of this one
-(:class:`fxflex.solid.tip_mass.Director`)."""
+along X (Pi_XX) is a configuration-dependent mass of rank 2, a Woodbury update of this one
+(:class:`fxflex.numerics.director.Director`)."""
 
 from __future__ import annotations
 

@@ -39,7 +39,7 @@ class HubTangent(HubFrameFactor):
     with either mass of the solid; its extent along X adds (m + c c/rho) Pi_XX J^T J with J at the
     hub-frame U (J turns with the hub as the rest does: B_n(A g) = A B_n(g) diag(A, A)^T), and
     ``solve_hub`` replaces that part by the one at the state of the last ``force`` call, with
-    c times the director's d(force)/dq' (:class:`fxflex.solid.tip_mass.Director`), by Woodbury
+    c times the director's d(force)/dq' (:class:`fxflex.numerics.director.Director`), by Woodbury
     on the 6 columns S_hub^-1 W^T stored at the factorisation: the director's mass changes with
     the face's rotation while one factor serves many steps (without it the modified Newton
     contracted by 7e-3 with a rod along X at 3000 rpm and dt = 2 us, against 4e-3 with a disc).

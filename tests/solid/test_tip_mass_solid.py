@@ -371,7 +371,7 @@ def test_a_rod_along_x_has_the_rotary_inertia_of_the_frequency_equation(mu, j):
               f", gap {gap:.2e}")
         assert ours < 0.99
         assert abs(ours / share - 1.0) < gap
-        assert abs(rod[fam] / disc[fam] - 1.0) < gap
+        assert abs(rod[fam] / disc[fam] - 1.0) < 1e-5    # the solid's own gap cancels here
 
 
 def test_rotating_rod_along_x_stiffens_the_flap_as_nebb():
@@ -379,9 +379,10 @@ def test_rotating_rod_along_x_stiffens_the_flap_as_nebb():
     rotation theta meets a centrifugal restoring moment Omega^2 P theta (the propeller moment of
     J_Z - J_X = P): it raises the rotating flap frequency against the one at rest, where it only
     adds J_Y. Its share, (f_rod / f_bare at 3000 rpm) / (the same at rest), TLF (director, about
-    the prestressed equilibrium) against NEBB (second-order point rotation), within the pair's
-    flap frequency gap at rest without the body (J_X + J_Y - J_Z = 0: the rod couples flap to
-    torsion in neither). And the rod moves the steady tip (twist 45 deg, the line load tilts
+    the prestressed equilibrium) against NEBB (second-order point rotation): the stiffening
+    itself, share - 1 (4 %), within the pair's flap frequency gap at rest without the body
+    (0.62 %; measured 0.33 %; J_X + J_Y - J_Z = 0: the rod couples flap to torsion in
+    neither). And the rod moves the steady tip (twist 45 deg, the line load tilts
     it) as NEBB's does, within twice the pair's own gap in the transverse tip deflection
     without the body, or in flap frequency, the larger: the rod adds no axial stretch (its pull
     is along its own axis; TLF: to 1e-8 of the stretch)."""
@@ -399,8 +400,8 @@ def test_rotating_rod_along_x_stiffens_the_flap_as_nebb():
     flap_gap = abs(_first("tlf", bare)["out-of-plane"]
                    / _first("nebb", bare_beam)["out-of-plane"] - 1.0)
     print(f"\nrod: share {solid:.5f} vs {ref:.5f}, gap {flap_gap:.2e}")
-    assert solid > 1.0                                 # the propeller moment stiffens
-    assert abs(solid / ref - 1.0) < flap_gap
+    assert solid > 1.03                                # the propeller moment stiffens, 4 %
+    assert abs((solid - 1.0) / (ref - 1.0) - 1.0) < flap_gap   # the stiffening itself
     tips = {}
     for m in ("tlf", "nebb"):
         for J in ((0, 0, 0), (0, P, P)):
@@ -600,10 +601,10 @@ def test_ffrf_invariants_carry_the_linearised_director(inertia):
 
 def test_ffrf_rod_along_x_as_lebb():
     """FFRF's director is linear (n = e_X + J u), as LEBB's point terms for Pi_XX: at rest the rod
-    along X [0, P, P] has the disc's [2 P, P, P] bending frequencies (to 1e-6); at 3000 rpm its
-    share of the rotating flap and lead-lag frequencies (against rest) is LEBB's within the
-    pair's own flap / lead-lag gap at rest (measured: flap 0.99997 vs 0.99997, lead-lag 0.97295
-    vs 0.97259 against gaps 0.6 % / 0.05 %). The linear theory keeps only the linear share of
+    along X [0, P, P] has the disc's [2 P, P, P] bending frequencies (to 1e-5); at 3000 rpm its
+    share of the rotating flap frequency (against rest) is 1 within 1e-4 in both (measured
+    0.99997: the Coriolis share), and of the lead-lag frequency LEBB's within the pair's own
+    lead-lag gap at rest (measured 0.97295 vs 0.97259 against 0.17 %). The linear theory keeps only the linear share of
     the rod's centrifugal terms: it softens lead-lag by -Omega^2 P (the linearised n leaves the
     unit sphere) and leaves flap alone, where TLF and NEBB, exact in the rotation, have no
     lead-lag effect and the propeller stiffening (shares 1.002 and 1.040)."""
@@ -615,9 +616,47 @@ def test_ffrf_rod_along_x_as_lebb():
                 f[m, J, rpm] = _first(m, _uniform(0.0, J, rpm, *extra))
     for fam in ("out-of-plane", "in-plane"):
         assert f["ffrf", (0, P, P), 0.0][fam] == pytest.approx(f["ffrf", (2 * P, P, P), 0.0][fam],
-                                                               rel=1e-6)
+                                                               rel=1e-5)
         gap = abs(f["ffrf", (0, 0, 0), 0.0][fam] / f["lebb", (0, 0, 0), 0.0][fam] - 1.0)
         share = {m: (f[m, (0, P, P), 3000.0][fam] / f[m, (0, 0, 0), 3000.0][fam])
                  / (f[m, (0, P, P), 0.0][fam] / f[m, (0, 0, 0), 0.0][fam]) for m in ("ffrf", "lebb")}
         print(f"\n{fam}: shares ffrf {share['ffrf']:.5f} lebb {share['lebb']:.5f}, gap {gap:.2e}")
-        assert abs(share["ffrf"] / share["lebb"] - 1.0) < max(gap, 1e-4)
+        if fam == "out-of-plane":                      # the linear theories: no flap effect
+            assert abs(share["ffrf"] - 1.0) < 1e-4 and abs(share["lebb"] - 1.0) < 1e-4
+        else:                                          # lead-lag: -Omega^2 P softening, 2.7 %
+            assert share["ffrf"] < 0.98 and abs(share["ffrf"] / share["lebb"] - 1.0) < gap
+
+
+@pytest.mark.parametrize("model", ["relative", "absolute"])
+def test_tlf_steady_state_is_a_rest_point_of_the_time_loop_with_a_rod(model):
+    """TLF (consistent mass) with a rod along X [0, 0.01, 0.01], twisted 30 deg, line load,
+    3000 rpm, damped (c = 1000): at its steady state turned to phi(t), moving rigidly with the
+    hub, the time loop's acceleration seen from the hub, A^T a + Omega^2 P (X0 + U), vanishes
+    on the free nodes to 3e-9 of the centripetal scale Omega^2 |X0 + U| (the steady Newton's
+    tolerance, 1e-10 of the undeformed residual, leaves ~3e-10: measured 2.6e-10 / 3.6e-10).
+    With the absolute damping model the time loop damps the director's own rate relative to the
+    rigidly turning e_X, as the steady state does (Director.absolute_damping): without it,
+    2.9e-8."""
+    from fxflex.scene.kinematics import P3, S3, rotation_z
+
+    sc = load_scene(overrides=["mesh.solid=[8,2,2]", "load.line_load=-20000", "rotation.rpm=3000",
+                               "tip_mass.mass=1.0", "tip_mass.inertia=[0, 0.01, 0.01]",
+                               f'damping.model="{model}"', "damping.c=1000",
+                               "geometry.twist_deg=30", "load.ramp_time=0"])
+    form = build("tlf", sc, COMM, BuildOptions(mass="consistent"))
+    U = np.asarray(form.steady_state().q)
+    X0 = form.model.node_coordinates().reshape(-1, 3)
+    omega, t = sc.rotation.omega, 0.3e-3
+    A = rotation_z(form.drive.angle(t))
+    x_hub = X0 + U.reshape(-1, 3)
+    x = x_hub @ A.T
+    q = (x - X0).reshape(-1)
+    v = (omega * x @ S3.T).reshape(-1)
+    a = np.zeros_like(q)
+    form.acceleration(t, q, v, a)
+    hub = (a.reshape(-1, 3) @ A + omega**2 * x_hub @ P3.T).reshape(-1)
+    free = np.ones(q.size, bool)
+    free[form.dynamics.root] = False
+    scale = omega**2 * _largest(x_hub)
+    print(f"\n{model}: rest-point acceleration {_largest(hub[free]) / scale:.2e} of the scale")
+    assert _largest(hub[free]) < 3e-9 * scale
