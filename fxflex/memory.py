@@ -320,6 +320,11 @@ def _scaled(method: str, scene: Scene, s: float) -> Scene:
     return scene.replace(**{"mesh.solid": (max(1, int(nx * f)), even(ny), even(nz))})
 
 
+#: estimated bytes below which :func:`check` does not read the available memory (no machine
+#: that runs Python and PETSc has less)
+SMALL_BUILD = 64 * 2**20
+
+
 def check(method: str, scene: Scene, comm, options: BuildOptions | None = None
           ) -> Estimate | None:
     """Refuse (FxflexError, on every rank) a build whose estimate exceeds the available memory of
@@ -332,14 +337,18 @@ def check(method: str, scene: Scene, comm, options: BuildOptions | None = None
     from mpi4py import MPI
 
     comm = comm if comm is not None else MPI.COMM_SELF     # the beams' replicated builds
+    wanted = _requested(scene, options)
+    routes = [None] if method in BEAMS else (
+        ["direct", "iterative"] if wanted == "auto" else [wanted])
+    if comm.size == 1:                  # a build too small to matter skips reading /proc and
+        first = estimate(method, scene, 1, options, route=routes[0])   # the cgroup (0.5 ms:
+        if first.total <= SMALL_BUILD:  # a tenth of a beam build, per --tol level)
+            return first
     node = comm.Split_type(MPI.COMM_TYPE_SHARED) if comm.size > 1 else None
     local_ranks = node.size if node is not None else 1
     if node is not None:
         node.Free()
     room = available()
-    wanted = _requested(scene, options)
-    routes = [None] if method in BEAMS else (
-        ["direct", "iterative"] if wanted == "auto" else [wanted])
     for way in routes:
         mine = estimate(method, scene, comm.size, options, route=way)
         need = mine.total * local_ranks / comm.size
