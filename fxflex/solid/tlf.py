@@ -125,7 +125,13 @@ class TLF(FormulationBase):
     def dynamics(self) -> Dynamics:
         if self._dyn is None:
             self._dyn = Dynamics(self)
+            if self._dyn.director is not None and self._mac_q is not None:
+                self._dyn.director.moving(self._mac_q, np.zeros_like(self._mac_q))
         return self._dyn
+
+    #: the equilibrium of the last linearisation: where a tip body's director mass is taken for
+    #: ``mass_apply`` outside a time loop (the MAC weights of fxflex.analysis.tracking)
+    _mac_q = None
 
     # -- Formulation interface --------------------------------------------------------------------
     #: (omega, owned U0): a starting guess for :meth:`steady_state` (one Newton continuation from
@@ -339,8 +345,9 @@ class TLF(FormulationBase):
         st = steady or self.steady_state()
         sc = self.scene
         if not tip_body_is_flat(sc.tip_mass.inertia):   # mass_apply's director mass (the
-            q = np.asarray(st.q, float)                  # MAC weights): at this equilibrium
-            self.dynamics.director.moving(q, np.zeros_like(q))
+            self._mac_q = np.asarray(st.q, float)        # MAC weights): at this equilibrium,
+            if self._dyn is not None:                    # now or when the loop data are built
+                self._dyn.director.moving(self._mac_q, np.zeros_like(self._mac_q))
         absolute = sc.damping.model == "absolute"
         start = {} if self.sweep is None else self.sweep.eigen_start(self, absolute)
         if self.options.linear == "iterative":
