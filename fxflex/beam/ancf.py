@@ -38,7 +38,7 @@ from fxflex.beam.invariants import GramChain
 from fxflex.beam.line import beam_line, twist_check
 from fxflex.formulation import FORCE_EVAL, BuildOptions, FormulationBase, SteadyState
 from fxflex.numerics.dense import DenseLU, newton, omega_max
-from fxflex.numerics.director import FactorUpdate
+from fxflex.numerics.director import Director, FactorUpdate
 from fxflex.numerics.hub import HubFrameFactor
 from fxflex.numerics.qep import DenseLinearisation
 from fxflex.numerics.sparse import SparseAdd
@@ -89,7 +89,6 @@ def tip_director(scene: Scene, e0_tip: np.ndarray, free: np.ndarray):
     at 3000 rpm). The tip node's slots are the last SLOTS, all free."""
     from mpi4py import MPI
 
-    from fxflex.numerics.director import Director
     from fxflex.scene.load import tip_body_is_flat
 
     tip = scene.tip_mass

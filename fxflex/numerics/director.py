@@ -107,10 +107,10 @@ class Director:
 
     # -- the director -----------------------------------------------------------------------------
     def gradients(self, y: np.ndarray) -> np.ndarray:
-        """W y: (2, 3) rows g_Y, g_Z of the owned-entry array y (positions or rates), on every
-        rank. Collective."""
-        part = y.reshape(-1, 3)[self.nodes]
-        return self.comm.allreduce(self.G.T @ part)
+        """W y: (2, 3) rows g_Y, g_Z of the owned-entry array y (positions or rates), or
+        (2, 3, k) for k columns y (n, k), on every rank. Collective."""
+        part = y.reshape((-1, 3) + y.shape[1:])[self.nodes]
+        return self.comm.allreduce(np.tensordot(self.G, part, axes=(0, 0)))
 
     @staticmethod
     def B(g: np.ndarray) -> np.ndarray:
@@ -212,28 +212,19 @@ class Director:
         self.add_spread(self._C @ self.gradients(x).reshape(-1), out, scale)
 
     def prepare(self, solve) -> None:
-        """Store Y = M0^-1 W^T (n, 6) and W Y for :meth:`woodbury`; ``solve(x)`` replaces a state
-        array x by M0^-1 x (the rest of the mass: the solid's with TipBody's flat part, ANCF's
-        M_s (x) I_3 with its flat part). Collective."""
-        cols = []
-        for k in range(6):
-            e = np.zeros(6)
-            e[k] = 1.0
-            x = self.spread(e)
-            solve(x)
-            cols.append(x)
-        Y = np.column_stack(cols)
-        self._WY = np.column_stack([self.gradients(c).reshape(-1) for c in cols])
-        self._rows = np.flatnonzero(np.any(Y != 0.0, axis=1))   # the face's, with a lumped M0
-        self._Y = Y[self._rows]
+        """Make :meth:`woodbury` ready for the mass M0 (the rest of the mass: the solid's with
+        TipBody's flat part, ANCF's M_s (x) I_3 with its flat part); ``solve(x)`` replaces a
+        state array x by M0^-1 x. Collective."""
+        def copy(b: np.ndarray) -> np.ndarray:
+            solve(b)
+            return b
+
+        self._time_loop = FactorUpdate(self, copy, np.zeros((6, 6)), 1.0, 0.0)
 
     def woodbury(self, out: np.ndarray) -> None:
         """out = M0^-1 r on entry, (M0 + W^T C W)^-1 r on exit, C = Pi_XX B_n^T B_n of the last
-        :meth:`moving` (push-through form, C singular allowed: x - Y (I + C W Y)^-1 C W x).
-        Collective."""
-        C = self._C
-        s = np.linalg.solve(np.eye(6) + C @ self._WY, C @ self.gradients(out).reshape(-1))
-        out[self._rows] -= self._Y @ s
+        :meth:`moving`: :class:`FactorUpdate` of M0, which holds none of it. Collective."""
+        self._time_loop.correct(out)
 
     # -- matrices ------------------------------------------------------------------------------------
     def _block(self, C6: np.ndarray, G_cols: np.ndarray) -> np.ndarray:
@@ -272,7 +263,9 @@ class FactorUpdate:
     m C + c C_t of the director's last :meth:`Director.moving` (its mass and c times the
     derivative of its velocity force by the rates), turned into the factor's frame by the
     rotation R (hub-frame factors: B_n(A g) = A B_n(g) diag(A, A)^T), by Woodbury on the six
-    columns S^-1 W^T stored here: x -= Y (I + dC W Y)^-1 dC W x."""
+    columns S^-1 W^T stored here: x -= Y (I + dC W Y)^-1 dC W x (push-through form, dC
+    singular allowed). With C6 = 0, m = 1, c = 0 it is the time loop's (M0 + Pi_XX J^T J)^-1
+    (:meth:`Director.woodbury`)."""
 
     def __init__(self, director: Director, solve, C6: np.ndarray, m: float, c: float):
         """``solve(b) -> x``: S^-1 on a state array (a copy); ``C6`` the director's part the
@@ -283,8 +276,10 @@ class FactorUpdate:
             e = np.zeros(6)
             e[k] = 1.0
             cols.append(solve(director.spread(e)))
-        self.Y = np.column_stack(cols)
-        self.WY = np.column_stack([director.gradients(y).reshape(-1) for y in cols])
+        Y = np.column_stack(cols)
+        self.WY = director.gradients(Y).reshape(6, 6)
+        self.rows = np.flatnonzero(np.any(Y != 0.0, axis=1))   # the face's, with a lumped M0
+        self.Y = Y[self.rows]
 
     def correct(self, x: np.ndarray, rotation: np.ndarray | None = None) -> None:
         """x = S^-1 r on entry (the factor's frame), the updated matrix's solve on exit.
@@ -296,4 +291,4 @@ class FactorUpdate:
             now = R6.T @ now @ R6
         dC = now - self.C6
         w = d.gradients(x).reshape(-1)
-        x -= self.Y @ np.linalg.solve(np.eye(6) + dC @ self.WY, dC @ w)
+        x[self.rows] -= self.Y @ np.linalg.solve(np.eye(6) + dC @ self.WY, dC @ w)

@@ -142,7 +142,7 @@ def mesh_data(model: SolidModel) -> MeshData:
         J0 += body.second_moment(P3)
         director = body.director
         if director is not None:         # Pi_XX: n0 = e_X, n = n0 + J u (FFRF, linearised)
-            Bn = director.normal(director.gradients(director.x0))[4]
+            Bn = director.normal(director.g0)[4]
             for B, f in ((P3, f_c), (S3, f_S)):
                 director.add_spread(director.pi * (Bn.T @ (B @ np.array([1.0, 0.0, 0.0]))), f)
             J0 += director.pi * P3[0, 0]
@@ -162,11 +162,10 @@ def director_corrections(data: MeshData, Phi: np.ndarray, BPhi: list) -> list:
     d = data.director
     if d is None:
         return []
-    Bn = d.normal(d.gradients(d.x0))[4]
+    Bn = d.normal(d.g0)[4]
 
     def J(X: np.ndarray) -> np.ndarray:            # (3, m)
-        part = X.reshape(-1, 3, X.shape[1])[d.nodes]
-        return Bn @ d.comm.allreduce(np.einsum("ak,aim->kim", d.G, part)).reshape(6, -1)
+        return Bn @ d.gradients(X).reshape(6, -1)
 
     JPhi = J(Phi)
     return [d.pi * (JPhi.T @ B @ JPhi - JPhi.T @ J(BdPhi)) for B, BdPhi in BPhi]
