@@ -35,8 +35,8 @@ FLAT_TIP_BODY = 1e-9
 def tip_body_is_flat(inertia) -> bool:
     """Whether a tip body of moments of inertia [J_X, J_Y, J_Z] has no extent along X: its second
     moment Pi_XX = (J_Y + J_Z - J_X) / 2 within FLAT_TIP_BODY of tr(Pi) = (J_X + J_Y + J_Z) / 2
-    (J_X = J_Y + J_Z typed in decimals is flat). What GCMS carries on the tip face; FFRF and
-    TLF carry any body (:mod:`fxflex.solid.tip_mass`)."""
+    (J_X = J_Y + J_Z typed in decimals is flat): the solids then need no director
+    (:mod:`fxflex.solid.tip_mass`)."""
     jx, jy, jz = (float(j) for j in inertia)
     return (jy + jz - jx) <= FLAT_TIP_BODY * (jx + jy + jz)
 
@@ -86,16 +86,6 @@ def _twist_per_element(scene: Scene, key: str, count: int, what: str) -> None:
                               f"section; allowed: at least {need} {what}")
 
 
-def check_tip_body(method: str, scene: Scene) -> None:
-    """GCMS refuses a tip body with extent along X (one line); every other method takes it."""
-    if method == "gcms" and not tip_body_is_flat(scene.tip_mass.inertia):
-        raise SceneError("tip_mass.inertia", "gcms carries a tip body flat in the tip section "
-                                             "plane (J_X = J_Y + J_Z: a director along X makes "
-                                             "the mass of its absolute coordinates turn with "
-                                             "the hub); allowed: J_X = J_Y + J_Z, e.g. a thin "
-                                             "disc [2 J, J, J], or ffrf, tlf, lebb, nebb, ancf")
-
-
 def validate_for(method: str, scene: Scene) -> None:
     """What only ``method`` needs of the scene: a mesh whose elements do not degenerate, a modal
     basis no larger than the mesh, and for ANCF and the solids a section that only stretches
@@ -111,7 +101,6 @@ def validate_for(method: str, scene: Scene) -> None:
     if scene.tip_mass.present and method not in TIP_MASS_METHODS:
         raise SceneError("tip_mass", f"{method} does not take a tip mass yet; allowed: mass and "
                                      f"inertia 0, or the methods {', '.join(TIP_MASS_METHODS)}")
-    check_tip_body(method, scene)
     if scene.mesh.solid_file:
         if method not in ("ffrf", "gcms", "tlf"):
             raise SceneError("mesh.solid_file", f"{method} is a beam method and takes its body "

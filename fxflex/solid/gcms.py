@@ -38,6 +38,13 @@ U = A^T u_f (SPEC section 2).
 
 Drive torque: the phi row, tau = phi'' J0 + w(phi).xi'' + 1/2 xi^T K'(phi) xi - r(t) s0 - Q_phi^d
 with Q_phi^d = -(c/rho) (w.xi' [+ phi' w'.xi]) (Eq. 23, D_rf = c/rho M_rf).
+
+Tip body. A [tip_mass] flat in the tip section plane is isotropic node by node and enters M like
+the solid's own mass. Its Pi_XX (extent along X) rides on the tip face's normal linearised at the
+reference, as in FFRF (:mod:`fxflex.solid.tip_mass`): a mass Pi_XX J^T J that does not commute
+with the G_id, so the Gram matrix, the global modes, w and J0 above are made from the isotropic
+part alone and the director is added in the rotating-frame coordinates zeta, where it is FFRF's
+(:class:`TipDirector`); the xi rows then have the mass I + R M_d R^T.
 """
 
 from __future__ import annotations
@@ -135,6 +142,11 @@ class GlobalModes:
     section: np.ndarray         # (6, r): tip translation and tip-section rotation per unit xi
     J0: float
     s0: float
+    #: a tip body's Pi_XX on the director linearised at the reference, n = e_X + b zeta in the
+    #: rotating frame (zero rows and 0 without one); wS, wP, J0 and the Gram blocks above are
+    #: the isotropic mass's alone (module docstring, "Tip body")
+    b: np.ndarray               # (3, r): dn per unit zeta
+    pi: float                   # Pi_XX
 
     @property
     def count(self) -> int:
@@ -147,6 +159,12 @@ def global_modes(model: SolidModel, data: MeshData, Phi: np.ndarray, tol: float)
     Psi = global_basis(Phi)
     MPsi = mat_apply(data.M, Psi)
     W = inner(comm, Psi, MPsi)
+    d, pi = data.director, 0.0
+    JPsi = np.zeros((3, 3 * m))
+    if d is not None:           # M holds Pi_XX J^T J (not isotropic): the Gram of the rest
+        pi = d.pi
+        JPsi = d.normal(d.g0)[4] @ d.gradients(Psi).reshape(6, -1)
+        W = W - pi * JPsi.T @ JPsi
     Kb = inner(comm, Psi, mat_apply(data.K, Psi))
     Kb = 0.5 * (Kb + Kb.T)
     s1, s2, s3 = slice(0, m), slice(m, 2 * m), slice(2 * m, 3 * m)
@@ -163,12 +181,15 @@ def global_modes(model: SolidModel, data: MeshData, Phi: np.ndarray, tol: float)
         return T.T @ inner(comm, Psi, vec)
 
     J = Wt @ C["S"] @ T
+    b = JPsi @ T
+    e_x = np.array([1.0, 0.0, 0.0])             # the director's own loads leave wS, wP and J0
     return GlobalModes(
         T=T, gram=mus, kept=kept, K9=K9, J=0.5 * (J - J.T), MP=Wt @ C["P"] @ T,
-        MG3=Wt @ C["G3"] @ T, wS=proj(data.f_S), wP=proj(data.f_c), QP=proj(nodal(P3, data.F)),
+        MG3=Wt @ C["G3"] @ T, wS=proj(data.f_S) - pi * b.T @ S3 @ e_x,
+        wP=proj(data.f_c) - pi * b.T @ P3 @ e_x, QP=proj(nodal(P3, data.F)),
         QS=proj(nodal(S3, data.F)), Q3=proj(nodal(G3, data.F)), tip=tip_rows(model, Psi) @ T,
         section=model.tip_section(Psi) @ T,
-        J0=data.J0, s0=data.load_torque)
+        J0=data.J0 - pi * P3[0, 0], s0=data.load_torque, b=b, pi=float(pi))
 
 
 class GCMS(ReducedFormulation):
@@ -190,8 +211,6 @@ class GCMS(ReducedFormulation):
         if n_global % 3:
             raise FxflexError(f"reduction.gcms_modes: must be a multiple of 3 (the global modes "
                               f"are [G1d Phi, G2d Phi, G3d Phi]), got {n_global}")
-        from fxflex.scene.load import check_tip_body
-        check_tip_body("gcms", scene)      # a tip body with extent along X: refused, one line
         t0 = time.perf_counter()
         tol = scene.reduction.gcms_gram_tol
         cached = self._use(n_global // 3, model, data, modes)
@@ -203,8 +222,15 @@ class GCMS(ReducedFormulation):
         self.K0 = 0.5 * (K[0, 0] + K[1, 1]) + K[2, 2]
         self.Kc1, self.Ks1 = K[0, 2] + K[2, 0], K[1, 2] + K[2, 1]
         self.Kc2, self.Ks2 = 0.5 * (K[0, 0] - K[1, 1]), 0.5 * (K[0, 1] + K[1, 0])
-        self.rot = RotatingSystem(K=self.stiffness(0.0), G=gm.J, N=-gm.J @ gm.J,
-                                  f=gm.QP + gm.Q3, n=gm.wP, tip=gm.tip, section=gm.section)
+        self.tip_director = td = (TipDirector(gm, self.c_rho, self.absolute) if gm.pi > 0.0
+                                  else None)
+        if td is None:
+            self.rot = RotatingSystem(K=self.stiffness(0.0), G=gm.J, N=-gm.J @ gm.J,
+                                      f=gm.QP + gm.Q3, n=gm.wP, tip=gm.tip, section=gm.section)
+        else:
+            self.rot = RotatingSystem(K=self.stiffness(0.0), G=gm.J + td.G, N=-gm.J @ gm.J + td.N,
+                                      f=gm.QP + gm.Q3, n=gm.wP + td.n, tip=gm.tip,
+                                      section=gm.section, M=np.eye(self.dof) + td.M)
         # relative damping's (c/rho) phi' J xi: one more weighted block, folded into K0 at
         # constant speed
         self._J_block = not self.absolute and not self.constant_speed
@@ -222,6 +248,9 @@ class GCMS(ReducedFormulation):
                                   [gm.QP, gm.QS, gm.Q3, gm.wS, gm.wP])
         self._dK = AffineStack([self.Kc1, self.Ks1, self.Kc2, self.Ks2])
         self._rotated: RotatedLU | None = None
+        self._phi_force = 0.0                     # the angle of the last force(): mass_apply's
+        self._R = np.empty((self.dof, self.dof))
+        self._R_buf, self._R_tmp = np.empty((self.dof, self.dof)), np.empty((self.dof, self.dof))
         self.timings["build"] = time.perf_counter() - t0
 
     def stiffness(self, phi: float) -> np.ndarray:
@@ -268,8 +297,52 @@ class GCMS(ReducedFormulation):
             S -= (self.c_rho * rate) * self.gm.J
         S *= k
         S.flat[::self.dof + 1] += m + c * self.c_rho
+        if self.tip_director is not None:      # its terms are R (...) R^T as well
+            S += self.tip_director.iteration_matrix(self.drive.state(t), m, c, k)
         self._rotated.lu.factor()
         return self._rotated
+
+    # -- the tip body's director: a mass that turns with the hub ----------------------------------
+    def acceleration(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """xi'' of Eq. 24; with a tip director (I + R M_d R^T) xi'' = f + R h (TipDirector),
+        solved as R ((I + M_d)^-1 R^T f + (I + M_d)^-1 h)."""
+        super().acceleration(t, q, v, out)
+        td = self.tip_director
+        if td is not None:
+            state = self.drive.state(t)
+            R = self._turn(state[0])
+            z, Rv, Rf = (R.T @ np.column_stack((q, v, out))).T
+            y = td.solved(state, z, Rv)
+            y += td.Minv @ Rf
+            np.dot(R, y, out=out)
+
+    def force(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+        """F of M(phi) xi'' = F: Eq. 24's right side [+ R h of the tip director, whose mass
+        I + R M_d R^T :meth:`mass_apply` then applies at this call's angle]."""
+        super().acceleration(t, q, v, out)
+        td = self.tip_director
+        if td is not None:
+            state = self.drive.state(t)
+            R = self._turn(state[0])
+            z, Rv = (R.T @ np.column_stack((q, v))).T
+            y = td.solved(state, z, Rv)
+            out += R @ (y + td.M @ y)
+            self._phi_force = state[0]
+
+    def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        out[:] = x
+        if self.tip_director is not None:
+            R = self._turn(self._phi_force)
+            out += R @ (self.tip_director.M @ (R.T @ x))
+
+    def _turn(self, phi: float) -> np.ndarray:
+        """R(phi) in a buffer of this build, overwritten by the next call."""
+        c, s, _, _ = rotation_weights(phi)
+        R, gm = self._R, self.gm
+        np.multiply(gm.MP, c, out=R)
+        R += gm.MG3
+        R += s * gm.J
+        return R
 
     def tip(self, t: float, q: np.ndarray) -> np.ndarray:
         """U_tip = A^T u_f,tip: the rigid rotation removed (SPEC section 2)."""
@@ -312,17 +385,113 @@ class GCMS(ReducedFormulation):
         tau = a * self.gm.J0 + wv @ acc + 0.5 * q @ dKq - self.ramp(t) * self.gm.s0
         rel = 0.0 if self.absolute else 1.0
         tau += self.c_rho * (wv @ v + rel * w * (wd @ q))
+        if self.tip_director is not None:
+            tau += self.tip_director.torque((phi, w, a), self.rotation(phi), q, v, acc)
         return float(tau)
 
     def kinetic_energy(self, t: float, q: np.ndarray, v: np.ndarray) -> float:
-        """T = 1/2 phi'^2 J0 + phi' w(phi).xi' + 1/2 xi'.xi' (Eq. 20)."""
+        """T = 1/2 phi'^2 J0 + phi' w(phi).xi' + 1/2 xi'.xi' (Eq. 20) [+ the tip director's]."""
         phi, w, _ = self.drive.state(t)
         wv, _ = self._w(phi)
-        return float(0.5 * w * w * self.gm.J0 + w * wv @ v + 0.5 * v @ v)
+        T = 0.5 * w * w * self.gm.J0 + w * wv @ v + 0.5 * v @ v
+        if self.tip_director is not None:
+            T += self.tip_director.energy(w, self.rotation(phi), q, v)
+        return float(T)
 
     def strain_energy(self, t: float, q: np.ndarray) -> float:
         """V_e = xi^T K(phi) xi / 2 (Eq. 21)."""
         return float(0.5 * q @ self.stiffness(self.drive.angle(t)) @ q)
+
+
+class TipDirector:
+    """A tip body's Pi_XX on GCMS (module docstring, "Tip body"): its director linearised at the
+    reference in the rotating frame, n = A (e_X + b zeta), zeta = R(phi)^T xi.
+
+    Its kinetic energy Pi_XX / 2 |b zeta' + phi' S (e_X + b zeta)|^2 adds, in zeta,
+
+        M_d zeta'' + 2 phi' G_d zeta' + phi'' (G_d zeta + g_d) - phi'^2 (N_d zeta + n_d)
+
+    (M_d = Pi b^T b, G_d = Pi b^T S b, N_d = Pi b^T P b, g_d = Pi b^T S e_X, n_d = Pi b^T P e_X:
+    FFRF's director terms on span(Psi~)), and the damping (c/rho) (M_d zeta' [+ phi' G_d zeta,
+    absolute]) (its rate relative to the frame, or to the rigidly turning e_X). With zeta' =
+    R^T (xi' - phi' J xi) and zeta'' = R^T (xi'' - 2 phi' J xi' - phi'' J xi + phi'^2 J^2 xi)
+    the xi rows read (I + R M_d R^T) xi'' = f + R h(zeta, zeta'): every added matrix is
+    R (...) R^T, so the mass and the iteration matrix keep GCMS's rotated factor."""
+
+    def __init__(self, gm: GlobalModes, c_rho: float, absolute: bool):
+        b, pi, e_x = gm.b, gm.pi, np.array([1.0, 0.0, 0.0])
+        self.J, self.c_rho, self.ab = gm.J, c_rho, 1.0 if absolute else 0.0
+        self.b, self.pi, self.e_x = b, pi, e_x
+        self.M = pi * b.T @ b
+        G = pi * b.T @ S3 @ b
+        self.G = 0.5 * (G - G.T)
+        N = pi * b.T @ P3 @ b
+        self.N = 0.5 * (N + N.T)
+        self.g, self.n = pi * b.T @ (S3 @ e_x), pi * b.T @ (P3 @ e_x)
+        r = gm.count
+        self.Minv = np.linalg.inv(np.eye(r) + self.M)
+        self.C = self.G - self.M @ self.J                # the zeta' and phi'' couplings
+        self.NJ = self.N + self.M @ self.J @ self.J
+        # (I + M_d)^-1 h = (weighted [C; NJ; G; CJ; MJ]) zeta + (weighted [C; M]) R^T xi' +
+        # loads, all premultiplied, zeta' = R^T xi' - phi' J zeta folded in: two products a step
+        Mi = self.Minv
+        self._on_z = AffineStack([Mi @ A for A in (self.C, self.NJ, self.G, self.C @ self.J,
+                                                   self.M @ self.J)])
+        self._on_v = AffineStack([Mi @ self.C, Mi @ self.M])
+        self._n, self._g = Mi @ self.n, Mi @ self.g
+        self._tmp = np.empty(gm.count)
+
+    def _zeta(self, R: np.ndarray, w: float, q: np.ndarray, v: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+        z = R.T @ q
+        return z, R.T @ v - w * (self.J @ z)             # J commutes with R
+
+    def solved(self, state, z: np.ndarray, Rv: np.ndarray) -> np.ndarray:
+        """(I + M_d)^-1 h, h the director's rows moved to the right side, in zeta (class
+        docstring), from zeta = R^T xi and R^T xi'."""
+        _, w, a = state
+        cr, ww = self.c_rho, w * w
+        self._on_z.w[:] = (-a, ww, -self.ab * cr * w, 2.0 * ww, cr * w)
+        self._on_v.w[:] = (-2.0 * w, -cr)
+        y, tmp = np.empty(len(z)), self._tmp
+        self._on_z.apply(z, y)
+        self._on_v.apply(Rv, tmp)
+        y += tmp
+        y += ww * self._n - a * self._g
+        return y
+
+    def iteration_matrix(self, state, m: float, c: float, k: float) -> np.ndarray:
+        """The director's share of m M + c C_t + k K_t at phi = 0 (R S R^T at any angle)."""
+        _, w, a = state
+        Cd = 2.0 * w * self.C + self.c_rho * self.M
+        Kd = -w * (Cd @ self.J) + a * self.C - w * w * self.NJ + self.ab * self.c_rho * w * self.G
+        return m * self.M + c * Cd + k * Kd
+
+    def _velocity(self, w: float, z: np.ndarray, zd: np.ndarray) -> np.ndarray:
+        return self.b @ zd + w * (S3 @ (self.e_x + self.b @ z))
+
+    def energy(self, w: float, R: np.ndarray, q: np.ndarray, v: np.ndarray) -> float:
+        """Pi_XX |n'|^2 / 2 (the whole of it: GCMS's J0 leaves Pi_XX out)."""
+        z, zd = self._zeta(R, w, q, v)
+        nd = self._velocity(w, z, zd)
+        return 0.5 * self.pi * float(nd @ nd)
+
+    def torque(self, state, R: np.ndarray, q: np.ndarray, v: np.ndarray, acc: np.ndarray
+               ) -> float:
+        """The director's share of the phi row at fixed xi: d/dt (dT_d/dphi') - dT_d/dphi
+        - Q_phi^d, with dn'/dphi' = S e_X + (S b - b J) zeta and, since zeta = R^T xi turns
+        with phi, d zeta / d phi = -J zeta; the damping's linear part."""
+        _, w, a = state
+        b, J, S = self.b, self.J, S3
+        z, zd = self._zeta(R, w, q, v)
+        zdd = R.T @ acc - 2.0 * w * (J @ zd) - (w * w) * (J @ (J @ z)) - a * (J @ z)
+        nd = self._velocity(w, z, zd)
+        ndd = b @ zdd + a * (S @ (self.e_x + b @ z)) + w * (S @ (b @ zd))
+        lever = S @ self.e_x + S @ (b @ z) - b @ (J @ z)
+        tau = ndd @ lever + nd @ (S @ (b @ zd) - b @ (J @ zd))
+        tau += nd @ (b @ (J @ zd) + w * (S @ (b @ (J @ z))))
+        damping = self.c_rho * (self.g @ zd + self.ab * w * (self.n @ z))
+        return float(self.pi * tau + damping)
 
 
 class RotatedLU:

@@ -28,11 +28,12 @@ Rotating-frame system. Both methods, written about the rotating frame at constan
 (FFRF in its modal coordinates, GCMS in coordinates rotated back with A^T, SPEC section 6), have
 the form
 
-    z'' + (2 Omega G_r + (c/rho) I) z' + (K_r - Omega^2 N_r + a (c/rho) Omega G_r) z
+    M_r z'' + (2 Omega G_r + (c/rho) M_r) z' + (K_r - Omega^2 N_r + a (c/rho) Omega G_r) z
         = f_r + Omega^2 n_r,
 
 a = 1 for the absolute damping model (Eq. 67, the circulatory term) and 0 for the relative one
-(Eq. 15-16, 22-23). :class:`RotatingSystem` holds (K_r, G_r, N_r, f_r, n_r) and the tip rows;
+(Eq. 15-16, 22-23); M_r = I but for GCMS with a tip body's Pi_XX (I + M_d, gcms.TipDirector).
+:class:`RotatingSystem` holds (K_r, G_r, N_r, f_r, n_r, M_r) and the tip rows;
 :class:`ReducedFormulation` derives from it the steady state, the linearisation (M, C, K) and its
 eigenvalues (growth rate, highest frequency) for both methods.
 """
@@ -245,6 +246,8 @@ class RotatingSystem:
     n: np.ndarray       # centrifugal load per unit Omega^2
     tip: np.ndarray     # (3, k): tip-centre deflection in O-XYZ per unit z
     section: np.ndarray  # (6, k): tip-centre translation and tip-section rotation per unit z
+    #: the mass, None for the identity (GCMS with a tip body's Pi_XX: I + M_d)
+    M: np.ndarray | None = None
 
 
 class ReducedFormulation(FormulationBase):
@@ -340,16 +343,16 @@ class ReducedFormulation(FormulationBase):
 
     def linearise(self, steady: SteadyState | None = None) -> DenseLinearisation:
         """(M, C, K) of the reduced equations linearised about the steady state in the rotating
-        frame: C = 2 Omega G_r + (c/rho) I (Coriolis + damping), K = K_r - Omega^2 N_r
+        frame: M = M_r, C = 2 Omega G_r + (c/rho) M_r (Coriolis + damping), K = K_r - Omega^2 N_r
         (+ (c/rho) Omega G_r, the circulatory term of the absolute damping model). The reduced
         equations are linear, so this does not depend on the steady state itself."""
         r, w = self.rot, self.omega_s
-        eye = np.eye(self.dof)
-        C = 2.0 * w * r.G + self.c_rho * eye
+        M = np.eye(self.dof) if r.M is None else r.M
+        C = 2.0 * w * r.G + self.c_rho * M
         K = r.K - w * w * r.N
         if self.absolute:
             K = K + self.c_rho * w * r.G
-        return DenseLinearisation(eye, C, K)
+        return DenseLinearisation(M, C, K)
 
     def rotating_state(self, t: float, q: np.ndarray, v: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:

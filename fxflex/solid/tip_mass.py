@@ -24,9 +24,9 @@ node pair cannot tell a rotation from a strain there.) The rest, Pi_XX, TLF carr
 face's unit normal n = g_Y x g_Z / |g_Y x g_Z| (:class:`fxflex.numerics.director.Director`, on
 the columns G below: a mass that depends on the configuration, exact for every rigid motion of
 the face) and FFRF on that normal linearised at the reference (a constant, non-isotropic mass:
-:func:`fxflex.solid.reduction.director_corrections`); GCMS, whose absolute coordinates would
-see that mass turn with the hub, refuses it with one line
-(:func:`fxflex.scene.load.check_tip_body`).
+:func:`fxflex.solid.reduction.director_corrections`); GCMS on the same linearised normal, kept
+apart from its Gram matrix (in its absolute coordinates that mass turns with the hub:
+:class:`fxflex.solid.gcms.TipDirector`).
 
 Then for any rigid motion of the face, v_a = v_c + omega x r_a' (r_a' = A r_a, any rotation A,
 not only a small one), the kinetic energy 1/2 sum mu_ab v_a . v_b is
