@@ -7,13 +7,17 @@ between theories is what ``fxflex compare`` is for.
 
 Refinement ladder per method (:func:`ladder`), cheap first, only through existing scene keys:
 
-- LEBB: ``mesh.beam_elements`` 2, 4, 8, ... (uniform Euler-Bernoulli beam; converges as h^2,
-  docs/convergence_measured.md);
+- LEBB: ``mesh.beam_elements`` 2, 4, then the counts the convergence asks for (uniform
+  Euler-Bernoulli beam; converges as h^2, docs/convergence_measured.md);
 - NEBB, ANCF: ``mesh.beam_variant = "locking-free"`` (unless the scene sets another variant than
   the default "paper" -- a scene that names "paper" explicitly is the default and is refined
-  locking-free too), elements 4, 8, ... (NEBB) and 2, 4, ... (ANCF: from 2, not 5, since
-  2026-12-06: its 2-4-8-16 levels reach EPS at a third to a half of the 5-10-20 levels' cost,
-  steady and modes, docs/tolerance.md);
+  locking-free too), elements 2, 4, then as LEBB (ANCF from 2, not 5, since 2026-12-06: its
+  2-4-8-16 levels reached EPS at a third to a half of the 5-10-20 levels' cost; NEBB from 2,
+  not 4, with the predicted levels; docs/tolerance.md). From the third level on a beam level
+  is not a doubling but the count the levels so far ask for (:func:`next_elements`: the last
+  level's estimated error and order, aiming at AIM EPS, within JUMP times the last count), so
+  that the level that meets EPS is not up to twice the size needed; NEBB starts each level's
+  Newton iteration from the coarser level's equilibrium (:meth:`Refiner._seed`);
 - TLF, FFRF, GCMS: ``mesh.solid_degree = 2`` (27-node hexahedra) on ``mesh.solid`` =
   8x2x2, 16x2x2, 32x4x2, 48x6x4, 64x8x4, 96x12x6 (Y and Z divisions stay even, SPEC 8). FFRF and
   GCMS solve every mesh at 2 n modes (``reduction.ffrf_modes`` / ``gcms_modes``, n the scene's,
@@ -61,9 +65,19 @@ __all__ = ["COMPONENTS", "SOLID_LADDER", "MAX_DOF", "ToleranceNotMet", "ladder",
 COMPONENTS = ("longitudinal", "orthogonal", "load")
 #: Q2 meshes (nx, ny, nz) of the solid methods, coarse to fine
 SOLID_LADDER = ((8, 2, 2), (16, 2, 2), (32, 4, 2), (48, 6, 4), (64, 8, 4), (96, 12, 6))
-#: beam element counts: first level and number of doublings
-BEAM_START = {"lebb": 2, "nebb": 4, "ancf": 2}
+#: beam element counts: first level and number of doublings (the second level doubles the
+#: first; from the third on, the counts the convergence asks for: :func:`next_elements`)
+BEAM_START = {"lebb": 2, "nebb": 2, "ancf": 2}
 BEAM_LEVELS = 8
+#: the order that sizes a beam level from two levels: the beams' tips converge as h^2
+#: (docs/convergence_measured.md; frequencies faster, so the level overshoots)
+BEAM_ORDER = 2.0
+#: a predicted beam level aims at this share of EPS (a level that misses costs one more)
+AIM = 0.5
+#: a predicted beam level is at least 1.5 and at most 4 times the last (Richardson on close
+#: levels amplifies their differences' round-off; a far jump from a pre-asymptotic estimate
+#: overshoots)
+JUMP = (1.5, 4.0)
 #: default cap on the unknowns of a level (Q2 64x8x4 has 58752; 96x12x6 187200 is refused)
 MAX_DOF = 100_000
 #: observed orders accepted for Richardson (the clamp singularity gives ~1.5 on Q2, beams 2)
@@ -110,18 +124,43 @@ class ToleranceNotMet(FxflexError):
         super().__init__(message)
 
 
-def ladder(method: str, scene: Scene) -> list[tuple[float, dict]]:
-    """(h, scene overrides in TOML layout) per level, coarse first (module docstring)."""
+def ladder(method: str, scene: Scene, start: int | None = None) -> list[tuple[float, dict]]:
+    """(h, scene overrides in TOML layout) per level, coarse first (module docstring); beams
+    from ``start`` elements (default BEAM_START) doubling up to the last of the default ladder."""
     if method in SOLIDS:
         return [(1.0 / nx, {"mesh": {"solid_degree": 2, "solid": [nx, ny, nz]}})
                 for nx, ny, nz in SOLID_LADDER]
     n0 = BEAM_START[method]
+    last = n0 * 2 ** (BEAM_LEVELS - 1)
     mesh: dict = {}
     if method in ("nebb", "ancf"):
         variant = scene.mesh.beam_variant
         mesh["beam_variant"] = "locking-free" if variant == "paper" else variant
-    return [(1.0 / (n0 * 2**k), {"mesh": {**mesh, "beam_elements": n0 * 2**k}})
-            for k in range(BEAM_LEVELS)]
+    counts, n = [], start or n0
+    while n <= last:
+        counts.append(n)
+        n *= 2
+    return [(1.0 / n, {"mesh": {**mesh, "beam_elements": n}}) for n in counts]
+
+
+def next_elements(hs, values, err: np.ndarray, how: list[str], eps: float) -> int:
+    """The beam element count the convergence so far asks for (module docstring): per quantity
+    the error of the last level e (the Richardson estimate, or the last difference over
+    (n_2 / n_1)^p - 1), the order p (Richardson's observed one within [1, 4], else BEAM_ORDER),
+    and n (e / (AIM eps))^(1 / p); the largest, within JUMP times the last count."""
+    n1, n2 = 1.0 / hs[-2], 1.0 / hs[-1]
+    f = np.asarray(values, float)
+    factor = 0.0
+    for k, kind in enumerate(how):
+        p, e = BEAM_ORDER, float(err[k])
+        if kind.startswith("richardson"):
+            q, _ = richardson(hs[-3:], f[-3:, k])
+            p = min(max(q, 1.0), 4.0) if q is not None else p
+        else:
+            e /= (n2 / n1) ** p - 1.0
+        factor = max(factor, (e / (AIM * eps)) ** (1.0 / p))
+    lo, hi = JUMP
+    return int(min(max(np.ceil(n2 * factor), np.ceil(lo * n2)), hi * n2))
 
 
 def estimate(h, values, scale, order_cap: float | None = None) -> tuple[np.ndarray, list[str]]:
@@ -184,16 +223,16 @@ class Refiner:
             return self.done[key]
         t0 = time.perf_counter()
         form = build(self.method, scene, self.comm, self.options)
-        if self.method == "tlf":
+        if self.method in ("tlf", "nebb"):
             self._seed(form, what)
         return self._evaluate(key, scene, form, t0)
 
     def _seed(self, form, what: str) -> None:
-        """TLF: start the equilibrium from the previous level's, prolongated to this mesh
-        (nested iteration: one Newton continuation of about three iterations instead of the
-        stages from the undeformed body; :func:`fxflex.solid.tlf_steady.prolongate`)."""
-        from fxflex.solid.tlf_steady import prolongate
-
+        """TLF, NEBB: start the equilibrium from the previous level's, prolongated to this mesh
+        (nested iteration; TLF: one Newton continuation of about three iterations instead of
+        the stages from the undeformed body, :func:`fxflex.solid.tlf_steady.prolongate`; NEBB:
+        two or three Newton iterations instead of four, the coarse level's Hermite interpolant
+        at the new nodes, :meth:`fxflex.beam.frame.FloatingFrameBeam.prolongate`)."""
         previous = self._last.get(what)
         steady = getattr(previous, "_steady", None)
         if steady is None or not steady.converged:
@@ -202,6 +241,12 @@ class Refiner:
                    for x in (previous, form)]
         if problem[0] != problem[1]:            # another scene than this ladder's: no guess
             return
+        if self.method == "nebb":
+            if previous.variant == form.variant:
+                form.steady_start = previous.prolongate(steady.q, form.line.x_nodes)
+            return
+        from fxflex.solid.tlf_steady import prolongate
+
         U0 = prolongate(previous.model, steady.q, form.model)
         if U0 is not None:
             form.steady_start = (form.scene.rotation.omega, U0)
@@ -252,15 +297,19 @@ def _public(row: dict, what: str) -> dict:
 def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: int | None,
             max_dof: int, log) -> dict:
     method = refiner.method
-    steps = ladder(method, scene)[: max_levels or None]
+    steps = ladder(method, scene)
+    cap = min(max_levels or len(steps), len(steps))
     key = MODAL.get(method)                   # FFRF / GCMS: each mesh at n and 2 n modes
     count = max(getattr(scene.reduction, key), MIN_MODES[method]) if key else 0
     doublings, spent = 0, []                  # spent: the levels of a pass given up
     while True:
         hs, rows, levels, err, how = [], [], [], None, []
         mode_err = 0.0
-        capped, restart = "the ladder's last level", False
-        for h, overrides in steps:
+        capped, restart, stopped = "the ladder's last level", False, False
+        pending, used = list(steps), 0
+        while pending and used < cap:
+            h, overrides = pending.pop(0)
+            used += 1
             if key:
                 overrides = {**overrides, "reduction": {key: 2 * count}}
             level_scene = scene_from_dict(overrides, base=scene)
@@ -290,7 +339,10 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                                     SOLID_MODES_ORDER if method in SOLIDS and what == "modes"
                                     else None)
                 if np.all(err + mode_err < eps):
+                    stopped = True
                     break
+                if method not in SOLIDS:      # the next beam level: the count asked for
+                    pending = ladder(method, scene, next_elements(hs, values, err, how, eps))
                 if key and np.any((mode_err >= eps / 2.0) & (mode_err >= err)):
                     # the mode count, not the mesh, is what is short: a finer mesh cannot help
                     restart = doublings < MODE_DOUBLINGS and _pair_fits(
@@ -299,10 +351,10 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                         capped = (f"{MODE_DOUBLINGS} doublings of the mode count"
                                   if doublings == MODE_DOUBLINGS else
                                   f"the mode counts the first mesh holds ({key} {2 * count})")
+                    stopped = True
                     break
-        else:
-            if max_levels:
-                capped = f"the cap of {max_levels} levels"
+        if not stopped and max_levels and used == cap and cap < len(steps):
+            capped = f"the cap of {max_levels} levels"
         if not restart:
             break
         spent += levels

@@ -283,6 +283,11 @@ class FloatingFrameBeam(FormulationBase):
     # ------------------------------------------------------------------ nonlinear hooks (NEBB)
     nonlinear = False
 
+    def add_static_force(self, Wfull: np.ndarray, out: np.ndarray) -> None:
+        """The nonlinear force of the steady Newton and the root stress (no time loop): NEBB's
+        element route, which needs none of the time loop's system matrices."""
+        self.add_nonlinear_force(Wfull, out)
+
     def add_nonlinear_force(self, Wfull: np.ndarray, out: np.ndarray) -> None:
         """out += Q_N(W) on the full coordinate vector (root included); LEBB: nothing."""
 
@@ -486,7 +491,7 @@ class FloatingFrameBeam(FormulationBase):
         if self.nonlinear:
             Wf, QN = np.zeros(self.n_full), np.zeros(self.n_full)
             Wf[6:] = W
-            self.add_nonlinear_force(Wf, QN)
+            self.add_static_force(Wf, QN)
             r += QN[6:]
         return r
 
@@ -499,13 +504,37 @@ class FloatingFrameBeam(FormulationBase):
         t0 = time.perf_counter()
         omega = self.scene.rotation.omega
         tangent = lambda W, s: self._stiffness(W, np.sqrt(s) * omega)
-        W, its, hist, ok = newton(self._static_residual, tangent, np.zeros(self.dof))
+        start = self.steady_start
+        if start is not None:                     # a guess (nested iteration): else from rest
+            W, its, hist, ok = newton(self._static_residual, tangent, start)
+            if not ok:
+                start = None
+        if start is None:
+            W, its, hist, ok = newton(self._static_residual, tangent, np.zeros(self.dof))
         if not ok and self.nonlinear:
             W, its, hist, ok = newton(self._static_residual, tangent, np.zeros(self.dof),
                                       steps=tuple(np.linspace(0.1, 1.0, 10)))
         self._steady = SteadyState(tip=self.tip(0.0, W), q=W, iterations=its, residuals=hist,
                                    converged=ok, timings={"steady": time.perf_counter() - t0})
         return self._steady
+
+    #: a first guess of the steady state's W (the ``--tol`` ladder's coarser level, prolongated)
+    steady_start: np.ndarray | None = None
+
+    def prolongate(self, W: np.ndarray, x_nodes: np.ndarray) -> np.ndarray:
+        """This beam's coordinates W (root clamped) interpolated at the nodes ``x_nodes`` of
+        another mesh of the same line (root first): the element's shape matrix N_E (Eq. 37) at
+        each node, which gives the six nodal coordinates (values and rotations) there."""
+        from fxflex.beam.elements import lebb_tables
+
+        line = self.line
+        Wf = np.concatenate([np.zeros(6), W])
+        x = np.asarray(x_nodes, float)[1:]
+        e = np.minimum((x / line.le).astype(int), line.n_el - 1)
+        xi = x / line.le - e
+        N = lebb_tables(xi, line.le).N                            # (n, 6, 12)
+        ends = Wf[6 * e[:, None] + np.arange(12)]                 # (n, 12)
+        return np.einsum("nij,nj->ni", N, ends).reshape(-1)
 
     def linearise(self, steady: SteadyState | None = None) -> DenseLinearisation:
         """(M, C, K) of the motion about the steady state (SPEC section 6): C = 2 Omega G + D,

@@ -73,8 +73,10 @@ class NEBB(FloatingFrameBeam):
             D = np.einsum("q,qp,qr->pr", line.w, d, d)
             T1 = np.einsum("eqk,pr->ekpr", dx[..., None] * self.e1, D)
             T4 = np.einsum("e,pr,st->eprst", np.sum(dx * EA, axis=1), D, D)
+        # the system matrices serve the time loop's invariant route only: built on its first
+        # force (a steady state or modes analysis never needs them: half of a small build)
         self.engine = GramChain(T1, T4, dpn=6, spn=2, emap=SLOT_MAP, esign=SLOT_SIGN,
-                                system=self.force_eval == "invariant")
+                                system=False)
         # Eq. 66 work arrays
         n_el, nq = line.n_el, len(line.xi)
         self.EA = EA
@@ -92,6 +94,10 @@ class NEBB(FloatingFrameBeam):
             self.engine.add_force_system(Wfull, out)
         else:
             self.add_force_eq66(Wfull, out)
+
+    def add_static_force(self, Wfull: np.ndarray, out: np.ndarray) -> None:
+        """The element invariant route (the same force to round-off; no system matrices)."""
+        self.engine.add_force_element(Wfull, out)
 
     def add_force_eq66(self, Wfull: np.ndarray, out: np.ndarray) -> None:
         """out += sum_e K_Ne(W_e) W_e with K_Ne integrated at the Gauss points (Eq. 66)."""

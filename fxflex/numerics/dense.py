@@ -29,7 +29,8 @@ def newton(residual, tangent, x0: np.ndarray, *, rtol: float = 1e-10, maxit: int
     x = np.array(x0, dtype=float)
     history: list[float] = []
     iterations = 0
-    ref = max(np.linalg.norm(residual(np.zeros_like(x), 1.0)), np.linalg.norm(residual(x, 1.0)))
+    r0 = np.linalg.norm(residual(np.zeros_like(x), 1.0))
+    ref = max(r0, np.linalg.norm(residual(x, 1.0))) if np.any(x) else r0
     ref = ref if ref > 0 else 1.0
     converged = True
     for s in steps:
@@ -46,7 +47,7 @@ def newton(residual, tangent, x0: np.ndarray, *, rtol: float = 1e-10, maxit: int
                     and rn <= _residual_floor(J, x)):
                 ok = True
                 break
-            dx = la.solve(J, -r)
+            dx = np.linalg.solve(J, -r)
             x += dx
             iterations += 1
             if np.linalg.norm(dx) <= 1e-14 * max(np.linalg.norm(x), 1e-300):

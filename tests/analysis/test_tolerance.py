@@ -313,3 +313,80 @@ def test_only_the_solids_frequencies_cap_the_order(monkeypatch):
         except tolerance.ToleranceNotMet:
             pass
         assert seen and set(seen) == {cap}, (what, method, seen)
+
+
+def test_next_beam_level_is_the_count_the_convergence_asks_for():
+    """tolerance.next_elements on f = 1 + c h^p: from two levels (a difference) it assumes
+    BEAM_ORDER = 2 and asks for the smallest count whose error c / n^2 is below AIM EPS; from
+    three (Richardson) it uses the observed order (here 4: a smaller count); always within
+    JUMP times the last count."""
+    from fxflex.analysis.tolerance import AIM, JUMP, next_elements
+
+    h = 1.0 / np.array([2.0, 4.0])
+    c, eps = 0.03, 1e-3                        # needs 8 elements (c / n^2 <= AIM eps)
+    f = 1.0 + c * h**2
+    err, how = estimate(h, f[:, None], 1.0)
+    assert how == ["difference"]
+    n = next_elements(h, f[:, None], err, how, eps)
+    assert n == 8 and c / n**2 <= AIM * eps < c / (n - 1) ** 2
+    h3 = 1.0 / np.array([2.0, 4.0, 8.0])
+    for p, c, eps, want in ((2.0, 0.03, 2e-4, 18), (4.0, 30.0, 2e-4, 24)):
+        f3 = 1.0 + c * h3**p
+        err, how = estimate(h3, f3[:, None], 1.0)
+        assert how == ["richardson"]
+        n = next_elements(h3, f3[:, None], err, how, eps)
+        assert n == want and c / n**p <= AIM * eps < c / (n - 1) ** p
+    # within JUMP times the last count, both ways
+    assert next_elements(h, f[:, None], np.array([1.0]), ["difference"], 1e-12) == JUMP[1] * 4
+    assert next_elements(h, f[:, None], np.array([1e-12]), ["difference"], 1.0) == JUMP[0] * 4
+
+
+def test_beam_ladder_reaches_eps_on_the_predicted_level():
+    """LEBB at 10000 rpm, EPS 1e-3: from 2 and 4 elements the ladder asks for the count that
+    meets EPS and gets there on that third level (before: 2, 4, 8, 16); within EPS of a
+    128-element run (its own error below 1e-5, docs/convergence_measured.md)."""
+    from fxflex.analysis.tolerance import steady_to_tolerance
+
+    sc = scene_from_dict({"rotation": {"rpm": 10000.0}}, base=Scene())
+    out = steady_to_tolerance("lebb", sc, MPI.COMM_WORLD, 1e-3)
+    counts = [lv["discretisation"]["elements"] for lv in out["levels"]]
+    assert counts[:2] == [2, 4] and len(counts) == 3 and counts[2] not in (8, 16)
+    fine = build("lebb", scene_from_dict({"mesh": {"beam_elements": 128}}, base=sc),
+                 MPI.COMM_WORLD).steady_state().tip
+    tip = np.asarray(out["best"]["result"])
+    assert np.abs(tip - fine).max() / np.linalg.norm(fine) < 1e-3
+    assert max(out["estimate"]) < 1e-3
+
+
+def test_nebb_levels_start_from_the_coarser_equilibrium():
+    """NEBB's --tol levels start Newton from the coarser level's equilibrium, interpolated with
+    its own shape functions (FloatingFrameBeam.prolongate: on a nested mesh, 4 -> 8 elements,
+    the coarse field itself, so back on the coarse nodes it returns them to 1e-13). The seeded
+    equilibrium of 9 elements at 5000 rpm equals the cold one to the Newton tolerance (rtol 1e-10
+    of the residual; 1e-9 of |tip| here) in fewer iterations. The steady state uses the element
+    invariant route: the same force as the time loop's system route (to 1e-12), without
+    building the system matrices."""
+    base = {"rotation": {"rpm": 5000.0}, "mesh": {"beam_variant": "locking-free"}}
+
+    def nebb(n):
+        return build("nebb", scene_from_dict({**base, "mesh": {**base["mesh"],
+                                                               "beam_elements": n}}),
+                     MPI.COMM_WORLD)
+
+    coarse, nested, fine = nebb(4), nebb(8), nebb(9)
+    W = np.random.default_rng(2).standard_normal(coarse.dof)
+    back = nested.prolongate(coarse.prolongate(W, nested.line.x_nodes), coarse.line.x_nodes)
+    assert np.abs(back - W).max() < 1e-13 * np.abs(W).max()
+    cold = fine.steady_state()
+    assert fine.engine.K1h is None                  # no system matrices for a steady state
+    seeded = nebb(9)
+    seeded.steady_start = coarse.prolongate(coarse.steady_state().q, seeded.line.x_nodes)
+    st = seeded.steady_state()
+    assert st.converged and st.iterations < cold.iterations
+    assert np.abs(st.tip - cold.tip).max() < 1e-9 * np.linalg.norm(cold.tip)
+    Wf = np.concatenate([np.zeros(6), 1e-3 * np.random.default_rng(3).standard_normal(fine.dof)])
+    a, b = np.zeros(Wf.size), np.zeros(Wf.size)
+    fine.add_static_force(Wf, a)
+    fine.add_nonlinear_force(Wf, b)                 # the system route (builds it now)
+    assert fine.engine.K1h is not None
+    assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max()
