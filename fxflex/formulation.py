@@ -146,8 +146,9 @@ class Implicit(Protocol):
 
     def mass_apply(self, x: np.ndarray, out: np.ndarray) -> None:
         """out = M_ff x_f on the free coordinates (constrained entries of x ignored), 0 on
-        constrained ones. Where M depends on q (TLF with a tip body of extent along X), M at
-        the q of the last ``force`` call, which integrators therefore make first."""
+        constrained ones. Where M depends on q or t (a tip body of extent along X: TLF's on
+        q, GCMS's on the hub angle), M at the (t, q) of the last ``force`` call, which
+        integrators therefore make first."""
 
     def factorize(self, t: float, q: np.ndarray, v: np.ndarray, m: float, c: float, k: float
                   ) -> TangentFactor:

@@ -142,7 +142,8 @@ def step_study(family: ReducedFamily, method: str, dts, t_end: float, ref_dt: fl
     n = form.dof
     lin = form.linearise()
     M, C, K = lin.M, lin.C, lin.K
-    lam, left = la.eig(np.block([[np.zeros((n, n)), np.eye(n)], [-K, -C]]), left=True,
+    MK, MC = np.linalg.solve(M, K), np.linalg.solve(M, C)    # M = I but for a tip director
+    lam, left = la.eig(np.block([[np.zeros((n, n)), np.eye(n)], [-MK, -MC]]), left=True,
                        right=False)
     rows = []
     for dt in dts:

@@ -416,7 +416,9 @@ class TipDirector:
     absolute]) (its rate relative to the frame, or to the rigidly turning e_X). With zeta' =
     R^T (xi' - phi' J xi) and zeta'' = R^T (xi'' - 2 phi' J xi' - phi'' J xi + phi'^2 J^2 xi)
     the xi rows read (I + R M_d R^T) xi'' = f + R h(zeta, zeta'): every added matrix is
-    R (...) R^T, so the mass and the iteration matrix keep GCMS's rotated factor."""
+    R (...) R^T, so the mass and the iteration matrix keep GCMS's rotated factor. The
+    linearised normal has no X component (b's first row is zero), so G_d and n_d vanish to
+    round-off: kept as written, the general form of the terms."""
 
     def __init__(self, gm: GlobalModes, c_rho: float, absolute: bool):
         b, pi, e_x = gm.b, gm.pi, np.array([1.0, 0.0, 0.0])
