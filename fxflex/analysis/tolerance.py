@@ -295,7 +295,7 @@ def _public(row: dict, what: str) -> dict:
 
 
 def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: int | None,
-            max_dof: int, log) -> dict:
+            max_dof: int, log, predicted: bool = True) -> dict:
     method = refiner.method
     steps = ladder(method, scene)
     cap = min(max_levels or len(steps), len(steps))
@@ -341,7 +341,7 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                 if np.all(err + mode_err < eps):
                     stopped = True
                     break
-                if method not in SOLIDS:      # the next beam level: the count asked for
+                if predicted and method not in SOLIDS:   # the next beam level: as asked for
                     pending = ladder(method, scene, next_elements(hs, values, err, how, eps))
                 if key and np.any((mode_err >= eps / 2.0) & (mode_err >= err)):
                     # the mode count, not the mesh, is what is short: a finer mesh cannot help
@@ -431,23 +431,25 @@ def _scale(values, what: str):
 
 def steady_to_tolerance(method: str, scene: Scene, comm, eps: float, *, max_levels=None,
                         max_dof: int = MAX_DOF, refiner: Refiner | None = None,
-                        log=None) -> dict:
+                        log=None, predicted: bool = True) -> dict:
     """Refine until every tip component's estimated error relative to |tip| is below ``eps``.
     Returns ``best`` (the level: form, steady state, tip), ``scene`` (its scene), ``estimate``
     (per component), ``how``, ``levels`` and ``discretisation`` (SPEC 9); raises
-    :class:`ToleranceNotMet` (with that dict) when a cap ends the ladder above ``eps``."""
+    :class:`ToleranceNotMet` (with that dict) when a cap ends the ladder above ``eps``.
+    ``predicted=False``: the beams' levels double (the fixed ladder of a reference)."""
     _check(eps)
     refiner = refiner or Refiner(method, comm)
-    return _refine(refiner, scene, eps, "steady", max_levels, max_dof, log)
+    return _refine(refiner, scene, eps, "steady", max_levels, max_dof, log, predicted)
 
 
 def modes_to_tolerance(method: str, scene: Scene, comm, eps: float, pairs: int, *, options=None,
-                       max_levels=None, max_dof: int = MAX_DOF, log=None) -> dict:
+                       max_levels=None, max_dof: int = MAX_DOF, log=None,
+                       predicted: bool = True) -> dict:
     """As :func:`steady_to_tolerance` for the ``pairs`` lowest frequencies, each relative to
     itself; ``best`` carries the :class:`~fxflex.analysis.modes.Modes` of the level."""
     _check(eps)
     refiner = Refiner(method, comm, options, pairs)
-    return _refine(refiner, scene, eps, "modes", max_levels, max_dof, log)
+    return _refine(refiner, scene, eps, "modes", max_levels, max_dof, log, predicted)
 
 
 def json_fields(out: dict | None, what: str) -> dict:

@@ -51,8 +51,8 @@ import numpy as np
 
 from fxflex import cache
 from fxflex.analysis import reference as refmod
-from fxflex.analysis.tolerance import (MAX_DOF, ToleranceNotMet, modes_to_tolerance, shown,
-                                       steady_to_tolerance)
+from fxflex.analysis.tolerance import (BEAM_START, MAX_DOF, ToleranceNotMet,
+                                       modes_to_tolerance, shown, steady_to_tolerance)
 from fxflex.bench.common import machine, markdown_table
 from fxflex.errors import FxflexError
 from fxflex.io.payload import jsonable
@@ -338,8 +338,16 @@ def _tol_rows(store: _Store, method: str, scene: Scene, comm, epsilons, what: st
 
 
 def _reference_levels(method: str, rows: list[dict], what: str) -> int:
-    """Mesh levels of a reference: :data:`REF_EXTRA_LEVELS` beyond the finest row, at least 3."""
-    finest = max(len(_mesh_levels(r["levels"])) for r in rows)
+    """Mesh levels of a reference: :data:`REF_EXTRA_LEVELS` beyond the finest row, at least 3.
+    The beams' rows take predicted counts, their references the doubling ladder: its levels up
+    to the first at or above the finest row's count, then the extra ones."""
+    if method in STORED_THEORY:
+        finest = max(len(_mesh_levels(r["levels"])) for r in rows)
+    else:
+        most = max(lv["discretisation"]["elements"] for r in rows for lv in r["levels"])
+        finest, n = 1, BEAM_START[method]
+        while n < most:
+            finest, n = finest + 1, 2 * n
     return max(finest + REF_EXTRA_LEVELS[what].get(method, 1), 3)
 
 
@@ -348,10 +356,12 @@ def _ladder_reference(method: str, scene: Scene, comm, what: str, mesh_levels: i
     :data:`REF_EPS` (modes: to :data:`REF_MAX_DOF` unknowns), then :func:`own_reference`."""
     try:
         if what == "steady":
-            out = steady_to_tolerance(method, scene, comm, REF_EPS, max_levels=mesh_levels)
+            out = steady_to_tolerance(method, scene, comm, REF_EPS, max_levels=mesh_levels,
+                                      predicted=False)
         else:
             out = modes_to_tolerance(method, scene, comm, REF_EPS, PAIRS,
-                                     max_levels=mesh_levels, max_dof=REF_MAX_DOF)
+                                     max_levels=mesh_levels, max_dof=REF_MAX_DOF,
+                                     predicted=False)
     except ToleranceNotMet as exc:
         out = exc.result
     ref = own_reference(out["levels"], "tip_m" if what == "steady" else "frequencies_hz")
