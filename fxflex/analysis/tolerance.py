@@ -16,8 +16,10 @@ Refinement ladder per method (:func:`ladder`), cheap first, only through existin
   not 4, with the predicted levels; docs/tolerance.md). From the third level on a beam level
   is not a doubling but the count the levels so far ask for (:func:`next_elements`: the last
   level's estimated error and order, aiming at AIM EPS, within JUMP times the last count), so
-  that the level that meets EPS is not up to twice the size needed; NEBB starts each level's
-  Newton iteration from the coarser level's equilibrium (:meth:`Refiner._seed`);
+  that the level that meets EPS is not up to twice the size needed (steady states only: the
+  frequencies keep the doublings, whose Richardson triples leave the coarse levels behind);
+  NEBB starts each level's Newton iteration from the coarser level's equilibrium
+  (:meth:`Refiner._seed`);
 - TLF, FFRF, GCMS: ``mesh.solid_degree = 2`` (27-node hexahedra) on ``mesh.solid`` =
   8x2x2, 16x2x2, 32x4x2, 48x6x4, 64x8x4, 96x12x6 (Y and Z divisions stay even, SPEC 8). FFRF and
   GCMS solve every mesh at 2 n modes (``reduction.ffrf_modes`` / ``gcms_modes``, n the scene's,
@@ -341,7 +343,8 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                 if np.all(err + mode_err < eps):
                     stopped = True
                     break
-                if predicted and method not in SOLIDS:   # the next beam level: as asked for
+                if predicted and method not in SOLIDS and what == "steady":
+                    # the next beam level: the count the convergence asks for
                     pending = ladder(method, scene, next_elements(hs, values, err, how, eps))
                 if key and np.any((mode_err >= eps / 2.0) & (mode_err >= err)):
                     # the mode count, not the mesh, is what is short: a finer mesh cannot help
@@ -443,13 +446,12 @@ def steady_to_tolerance(method: str, scene: Scene, comm, eps: float, *, max_leve
 
 
 def modes_to_tolerance(method: str, scene: Scene, comm, eps: float, pairs: int, *, options=None,
-                       max_levels=None, max_dof: int = MAX_DOF, log=None,
-                       predicted: bool = True) -> dict:
+                       max_levels=None, max_dof: int = MAX_DOF, log=None) -> dict:
     """As :func:`steady_to_tolerance` for the ``pairs`` lowest frequencies, each relative to
     itself; ``best`` carries the :class:`~fxflex.analysis.modes.Modes` of the level."""
     _check(eps)
     refiner = Refiner(method, comm, options, pairs)
-    return _refine(refiner, scene, eps, "modes", max_levels, max_dof, log, predicted)
+    return _refine(refiner, scene, eps, "modes", max_levels, max_dof, log)
 
 
 def json_fields(out: dict | None, what: str) -> dict:

@@ -360,8 +360,7 @@ def _ladder_reference(method: str, scene: Scene, comm, what: str, mesh_levels: i
                                       predicted=False)
         else:
             out = modes_to_tolerance(method, scene, comm, REF_EPS, PAIRS,
-                                     max_levels=mesh_levels, max_dof=REF_MAX_DOF,
-                                     predicted=False)
+                                     max_levels=mesh_levels, max_dof=REF_MAX_DOF)
     except ToleranceNotMet as exc:
         out = exc.result
     ref = own_reference(out["levels"], "tip_m" if what == "steady" else "frequencies_hz")
