@@ -78,8 +78,10 @@ BEAM_ORDER = 2.0
 AIM = 0.5
 #: a predicted beam level is at least 1.5 and at most 4 times the last (Richardson on close
 #: levels amplifies their differences' round-off; a far jump from a pre-asymptotic estimate
-#: overshoots)
+#: overshoots); the last is the doubling ladder's (BEAM_START 2^(BEAM_LEVELS - 1))
 JUMP = (1.5, 4.0)
+#: at most this many predicted beam levels (1.5x each from 2 elements reaches 256 in 13)
+MAX_PREDICTED = 16
 #: default cap on the unknowns of a level (Q2 64x8x4 has 58752; 96x12x6 187200 is refused)
 MAX_DOF = 100_000
 #: observed orders accepted for Richardson (the clamp singularity gives ~1.5 on Q2, beams 2)
@@ -300,7 +302,13 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
             max_dof: int, log, predicted: bool = True) -> dict:
     method = refiner.method
     steps = ladder(method, scene)
-    cap = min(max_levels or len(steps), len(steps))
+    beam_steps = predicted and method not in SOLIDS and what == "steady"
+    # the predicted beam levels may be more than the doublings' (1.5x a level at least): the
+    # ladder then ends at its last count, not after len(steps) levels
+    cap = max_levels or (MAX_PREDICTED if beam_steps else len(steps))
+    if not beam_steps:
+        cap = min(cap, len(steps))
+    last = steps[-1][1]["mesh"].get("beam_elements")
     key = MODAL.get(method)                   # FFRF / GCMS: each mesh at n and 2 n modes
     count = max(getattr(scene.reduction, key), MIN_MODES[method]) if key else 0
     doublings, spent = 0, []                  # spent: the levels of a pass given up
@@ -317,6 +325,7 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
             level_scene = scene_from_dict(overrides, base=scene)
             if _mesh_unknowns(method, level_scene) > max_dof and len(rows) >= 2:
                 capped = f"the cap of {max_dof} unknowns"
+                stopped = True
                 break
             if not rows and _refused(method, level_scene, log):
                 continue                      # too coarse for the scene: the next mesh
@@ -343,9 +352,11 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                 if np.all(err + mode_err < eps):
                     stopped = True
                     break
-                if predicted and method not in SOLIDS and what == "steady":
-                    # the next beam level: the count the convergence asks for
-                    pending = ladder(method, scene, next_elements(hs, values, err, how, eps))
+                if beam_steps:                # the next beam level: the count asked for
+                    n = round(1.0 / hs[-1])
+                    pending = (ladder(method, scene, min(next_elements(hs, values, err, how,
+                                                                       eps), last))
+                               if n < last else [])
                 if key and np.any((mode_err >= eps / 2.0) & (mode_err >= err)):
                     # the mode count, not the mesh, is what is short: a finer mesh cannot help
                     restart = doublings < MODE_DOUBLINGS and _pair_fits(
@@ -356,7 +367,7 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                                   f"the mode counts the first mesh holds ({key} {2 * count})")
                     stopped = True
                     break
-        if not stopped and max_levels and used == cap and cap < len(steps):
+        if not stopped and max_levels and used == cap and pending:
             capped = f"the cap of {max_levels} levels"
         if not restart:
             break
@@ -389,7 +400,7 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
 
 
 def _refused(method: str, scene: Scene, log) -> bool:
-    """Whether the scene refuses this level of the ladder (a first mesh too coarse for it: ANCF
+    """Whether the scene refuses this level of the ladder (a first mesh too coarse for it: beam
     elements twisted by more than MAX_TWIST_PER_ELEMENT_DEG each, more modes than unknowns), so
     that the ladder starts at the next level; logged."""
     from fxflex.errors import SceneError
@@ -397,6 +408,9 @@ def _refused(method: str, scene: Scene, log) -> bool:
 
     try:
         validate_for(method, scene)
+        if method in ("lebb", "nebb"):         # their twist limit is checked at build
+            from fxflex.beam.line import twist_check
+            twist_check(scene, method)
     except SceneError as exc:
         if log is not None:
             log(f"--tol: {method} {describe(scene, method)} skipped: {exc}")

@@ -460,7 +460,7 @@ class FloatingFrameBeam(FormulationBase):
         Q = self.K_root @ Wf
         if self.nonlinear:
             QN = np.zeros(self.n_full)
-            self.add_nonlinear_force(Wf, QN)
+            self.add_static_force(Wf, QN)
             Q += QN[:6]
         Q -= self.scene.load.factor(t) * self.fq_root
         return self.line.shape.axial_stress(0.0, (-Q[0], Q[5], -Q[4]))
@@ -504,18 +504,19 @@ class FloatingFrameBeam(FormulationBase):
         t0 = time.perf_counter()
         omega = self.scene.rotation.omega
         tangent = lambda W, s: self._stiffness(W, np.sqrt(s) * omega)
-        start = self.steady_start
+        start, extra = self.steady_start, {}
         if start is not None:                     # a guess (nested iteration): else from rest
             W, its, hist, ok = newton(self._static_residual, tangent, start)
             if not ok:
-                start = None
+                start, extra = None, {"cold_fallback": True}
         if start is None:
             W, its, hist, ok = newton(self._static_residual, tangent, np.zeros(self.dof))
         if not ok and self.nonlinear:
             W, its, hist, ok = newton(self._static_residual, tangent, np.zeros(self.dof),
                                       steps=tuple(np.linspace(0.1, 1.0, 10)))
         self._steady = SteadyState(tip=self.tip(0.0, W), q=W, iterations=its, residuals=hist,
-                                   converged=ok, timings={"steady": time.perf_counter() - t0})
+                                   converged=ok, timings={"steady": time.perf_counter() - t0},
+                                   extra=extra)
         return self._steady
 
     #: a first guess of the steady state's W (the ``--tol`` ladder's coarser level, prolongated)

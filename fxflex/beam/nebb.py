@@ -95,6 +95,13 @@ class NEBB(FloatingFrameBeam):
         else:
             self.add_force_eq66(Wfull, out)
 
+    def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """As the frame's; a time loop follows, so the invariant route's system matrices are
+        built here, before its clock starts (a steady state or modes never needs them)."""
+        if self.force_eval == "invariant" and self.engine.K1h is None:
+            self.engine._build_system()
+        return super().initial_state()
+
     def add_static_force(self, Wfull: np.ndarray, out: np.ndarray) -> None:
         """The element invariant route (the same force to round-off; no system matrices)."""
         self.engine.add_force_element(Wfull, out)

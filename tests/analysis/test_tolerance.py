@@ -390,3 +390,60 @@ def test_nebb_levels_start_from_the_coarser_equilibrium():
     fine.add_nonlinear_force(Wf, b)                 # the system route (builds it now)
     assert fine.engine.K1h is not None
     assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max()
+
+
+def test_beam_prolongation_is_exact_for_a_cubic_and_the_ladder_seeds_nebb():
+    """FloatingFrameBeam.prolongate interpolates with the element's own shape functions: a
+    field in the coarse space, clamped at the root (W_Y, W_Z cubic with theta_Z = W_Y', theta_Y
+    = -W_Z', W_X and theta_X linear) comes out exactly at the nodes of a mesh that does not nest (3 -> 7
+    elements; to 1e-13). The NEBB ladder's second and later levels start from it
+    (Refiner._seed), and a guess whose Newton iteration fails is dropped for the cold start
+    (``cold_fallback``) with the cold equilibrium itself."""
+    from fxflex.analysis.tolerance import Refiner, steady_to_tolerance
+
+    base = {"mesh": {"beam_variant": "locking-free"}}
+
+    def nebb(n, **extra):
+        sc = scene_from_dict({**base, **extra, "mesh": {**base["mesh"], "beam_elements": n}})
+        return build("nebb", sc, MPI.COMM_WORLD)
+
+    coarse, fine = nebb(3), nebb(7)
+
+    def field(x):
+        wy, wz = 1e-3 * (x**3 - 0.4 * x**2), 2e-3 * (0.3 * x**3 + x**2)   # clamped at x = 0
+        dwy, dwz = 1e-3 * (3 * x**2 - 0.8 * x), 2e-3 * (0.9 * x**2 + 2 * x)
+        return np.column_stack([1e-4 * x, wy, wz, 3e-3 * x, -dwz, dwy])[1:].reshape(-1)
+
+    exact = field(fine.line.x_nodes)
+    got = coarse.prolongate(field(coarse.line.x_nodes), fine.line.x_nodes)
+    assert np.abs(got - exact).max() < 1e-13 * np.abs(exact).max()
+    refiner = Refiner("nebb", MPI.COMM_WORLD)
+    steady_to_tolerance("nebb", Scene(), MPI.COMM_WORLD, 1e-3, refiner=refiner)
+    forms = [row["form"] for row in refiner.done.values()]
+    assert len(forms) >= 3 and forms[0].steady_start is None
+    assert all(f.steady_start is not None and "cold_fallback" not in f.steady_state().extra
+               for f in forms[1:])
+    cold = nebb(7).steady_state()
+    bad = nebb(7)
+    bad.steady_start = np.full(bad.dof, 1e3)
+    st = bad.steady_state()
+    assert st.converged and st.extra.get("cold_fallback") is True
+    assert np.abs(st.tip - cold.tip).max() <= 1e-12 * np.linalg.norm(cold.tip)
+
+
+@pytest.mark.parametrize("method", ["lebb", "nebb"])
+def test_beam_ladder_skips_a_first_level_too_twisted_and_reaches_its_last(method):
+    """A first level the scene refuses (twist 200 deg: 2 elements twist 100 deg each, beyond
+    the 90 deg limit) is skipped, as for ANCF. And the predicted counts end on the doubling
+    ladder's last count (256), not below it: twist -160 deg, EPS 3e-7, where a predicted count
+    of 195 stopped the ladder with its estimate 4.6e-7 (a review) and 256 meets EPS."""
+    from fxflex.analysis.tolerance import steady_to_tolerance
+
+    twisted = scene_from_dict({"geometry": {"twist_deg": 200.0}}, base=Scene())
+    out = steady_to_tolerance(method, twisted, MPI.COMM_WORLD, 1e-3)
+    assert out["levels"][0]["discretisation"]["elements"] == 4
+    if method == "nebb":
+        sc = scene_from_dict({"geometry": {"twist_deg": -160.0}}, base=Scene())
+        out = steady_to_tolerance("nebb", sc, MPI.COMM_WORLD, 3e-7)
+        counts = [lv["discretisation"]["elements"] for lv in out["levels"]]
+        assert counts[-1] == 256 and max(out["estimate"]) < 3e-7
