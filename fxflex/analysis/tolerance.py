@@ -353,7 +353,7 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                     stopped = True
                     break
                 if beam_steps:                # the next beam level: the count asked for
-                    n = round(1.0 / hs[-1])
+                    n = level_scene.mesh.beam_elements
                     pending = (ladder(method, scene, min(next_elements(hs, values, err, how,
                                                                        eps), last))
                                if n < last else [])

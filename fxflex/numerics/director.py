@@ -112,6 +112,11 @@ class Director:
         part = y.reshape((-1, 3) + y.shape[1:])[self.nodes]
         return self.comm.allreduce(np.tensordot(self.G, part, axes=(0, 0)))
 
+    def reference_rows(self, y: np.ndarray) -> np.ndarray:
+        """J y = B_n0 W y at the reference (3, k) for columns y (n, k): the normal's change per
+        column, linearised about the undeformed body (FFRF, GCMS: n = e_X + J u). Collective."""
+        return self.normal(self.g0)[4] @ self.gradients(y).reshape(6, -1)
+
     @staticmethod
     def B(g: np.ndarray) -> np.ndarray:
         """B(g) (3 x 6) for g = W y (2, 3): c' = B W y'."""

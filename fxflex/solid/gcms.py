@@ -163,7 +163,7 @@ def global_modes(model: SolidModel, data: MeshData, Phi: np.ndarray, tol: float)
     JPsi = np.zeros((3, 3 * m))
     if d is not None:           # M holds Pi_XX J^T J (not isotropic): the Gram of the rest
         pi = d.pi
-        JPsi = d.normal(d.g0)[4] @ d.gradients(Psi).reshape(6, -1)
+        JPsi = d.reference_rows(Psi)
         W = W - pi * JPsi.T @ JPsi
     Kb = inner(comm, Psi, mat_apply(data.K, Psi))
     Kb = 0.5 * (Kb + Kb.T)
@@ -249,8 +249,8 @@ class GCMS(ReducedFormulation):
         self._dK = AffineStack([self.Kc1, self.Ks1, self.Kc2, self.Ks2])
         self._rotated: RotatedLU | None = None
         self._phi_force = 0.0                     # the angle of the last force(): mass_apply's
-        self._R = np.empty((self.dof, self.dof))
-        self._R_buf, self._R_tmp = np.empty((self.dof, self.dof)), np.empty((self.dof, self.dof))
+        self._R, self._R_work = np.empty((self.dof, self.dof)), np.empty((self.dof, self.dof))
+        self._R_phi: float | None = None          # the angle _R holds
         self.timings["build"] = time.perf_counter() - t0
 
     def stiffness(self, phi: float) -> np.ndarray:
@@ -258,10 +258,18 @@ class GCMS(ReducedFormulation):
         c, s, c2, s2 = rotation_weights(phi)
         return self.K0 + c * self.Kc1 + s * self.Ks1 + c2 * self.Kc2 + s2 * self.Ks2
 
-    def rotation(self, phi: float) -> np.ndarray:
-        """R(phi) = Psi~^T M A_d Psi~: A_d Psi~ = Psi~ R on the retained span."""
+    def rotation(self, phi: float, out: np.ndarray | None = None) -> np.ndarray:
+        """R(phi) = Psi~^T M A_d Psi~: A_d Psi~ = Psi~ R on the retained span; written into
+        ``out`` when given (no allocation: the time loops)."""
         c, s, _, _ = rotation_weights(phi)
-        return c * self.gm.MP + s * self.gm.J + self.gm.MG3
+        gm = self.gm
+        if out is None:
+            return c * gm.MP + s * gm.J + gm.MG3
+        np.multiply(gm.MP, c, out=out)
+        np.multiply(gm.J, s, out=self._R_work)
+        out += self._R_work
+        out += gm.MG3
+        return out
 
     def _weights(self, t: float) -> None:
         if self._at_rest:
@@ -336,13 +344,12 @@ class GCMS(ReducedFormulation):
             out += R @ (self.tip_director.M @ (R.T @ x))
 
     def _turn(self, phi: float) -> np.ndarray:
-        """R(phi) in a buffer of this build, overwritten by the next call."""
-        c, s, _, _ = rotation_weights(phi)
-        R, gm = self._R, self.gm
-        np.multiply(gm.MP, c, out=R)
-        R += gm.MG3
-        R += s * gm.J
-        return R
+        """R(phi) in a buffer of this build, kept for the next call at the same angle
+        (mass_apply after force)."""
+        if phi != self._R_phi:
+            self.rotation(phi, self._R)
+            self._R_phi = phi
+        return self._R
 
     def tip(self, t: float, q: np.ndarray) -> np.ndarray:
         """U_tip = A^T u_f,tip: the rigid rotation removed (SPEC section 2)."""
@@ -502,18 +509,13 @@ class RotatedLU:
 
     def __init__(self, gcms: GCMS):
         n = gcms.dof
-        self.gm, self.drive = gcms.gm, gcms.drive
+        self.gcms, self.drive = gcms, gcms.drive
         self.lu = DenseLU(n)
-        self._R, self._W = np.zeros((n, n)), np.zeros((n, n))
+        self._R = np.zeros((n, n))
         self._b, self._x = np.zeros(n), np.zeros(n)
 
     def solve(self, t: float, r: np.ndarray, out: np.ndarray) -> None:
-        c, s, _, _ = rotation_weights(self.drive.angle(t))
-        R, W, gm = self._R, self._W, self.gm
-        np.multiply(gm.MP, c, out=R)
-        np.multiply(gm.J, s, out=W)
-        R += W
-        R += gm.MG3
+        R = self.gcms.rotation(self.drive.angle(t), self._R)
         np.dot(R.T, r, out=self._b)
         self.lu.solve_into(self._b, self._x)
         np.dot(R, self._x, out=out)

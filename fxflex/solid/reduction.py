@@ -163,13 +163,8 @@ def director_corrections(data: MeshData, Phi: np.ndarray, BPhi: list) -> list:
     d = data.director
     if d is None:
         return []
-    Bn = d.normal(d.g0)[4]
-
-    def J(X: np.ndarray) -> np.ndarray:            # (3, m)
-        return Bn @ d.gradients(X).reshape(6, -1)
-
-    JPhi = J(Phi)
-    return [d.pi * (JPhi.T @ B @ JPhi - JPhi.T @ J(BdPhi)) for B, BdPhi in BPhi]
+    JPhi = d.reference_rows(Phi)
+    return [d.pi * (JPhi.T @ B @ JPhi - JPhi.T @ d.reference_rows(BdPhi)) for B, BdPhi in BPhi]
 
 
 # -- cache of the projections ---------------------------------------------------------------------
