@@ -52,6 +52,7 @@ dict (the disk caches of meshes and modes help across runs).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -210,19 +211,23 @@ def describe(scene: Scene, method: str) -> dict:
 
 
 class Refiner:
-    """Solves levels of one method on one communicator and keeps them by scene hash (in-process
-    reuse; ``steady`` and ``modes`` share the builds through the disk caches)."""
+    """Solves levels of one method on one communicator and keeps them by scene (in-process reuse;
+    ``steady`` and ``modes`` share the builds through the disk caches). The key is the frozen
+    scene itself (its fields' equality and hash), not :attr:`Scene.hash`: that one serialises
+    the scene and reads the files it names, a tenth of a millisecond a level, which a beam
+    level of about one millisecond pays again at every level (files do not change within
+    one command)."""
 
     def __init__(self, method: str, comm, options=None, pairs: int = 6):
         self.method, self.comm, self.options, self.pairs = method, comm, options, pairs
-        self.done: dict[tuple[str, str], dict] = {}
+        self.done: dict[tuple[str, Scene], dict] = {}
         self._last: dict[str, object] = {}       # the last level's form per "steady" / "modes"
 
     def level(self, scene: Scene, what: str) -> dict:
         """One level: ``what`` = "steady" (tip, m) or "modes" (frequencies, Hz)."""
         from fxflex.formulation import build
 
-        key = (what, scene.hash)
+        key = (what, scene)
         if key in self.done:
             return self.done[key]
         t0 = time.perf_counter()
@@ -241,10 +246,9 @@ class Refiner:
         steady = getattr(previous, "_steady", None)
         if steady is None or not steady.converged:
             return
-        problem = [{k: v for k, v in x.scene.to_dict().items() if k != "mesh"}
-                   for x in (previous, form)]
-        if problem[0] != problem[1]:            # another scene than this ladder's: no guess
-            return
+        if any(getattr(previous.scene, f.name) != getattr(form.scene, f.name)
+               for f in dataclasses.fields(Scene) if f.name != "mesh"):
+            return                              # another scene than this ladder's: no guess
         if self.method == "nebb":
             if previous.variant == form.variant:
                 form.steady_start = previous.prolongate(steady.q, form.line.x_nodes)
@@ -260,7 +264,7 @@ class Refiner:
         same mesh, FFRF / GCMS): built on the source's mesh, operators and clamped modes, of
         which it takes the first ones, so that a mode-count difference costs one eigensolve
         (the larger) and one more projection."""
-        key = (what, scene.hash)
+        key = (what, scene)
         if key in self.done:
             return self.done[key]
         t0 = time.perf_counter()

@@ -16,6 +16,7 @@ tables in ``tests/beam/test_elements.py``.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import basix
@@ -39,9 +40,18 @@ def gauss(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _tabulate(family, degree: int, nderiv: int, xi: np.ndarray) -> np.ndarray:
+    """Reference-interval tabulation (nderiv + 1, npoints, ndofs), read-only: every level of a
+    ``--tol`` ladder tabulates at the same points, so it is kept (callers copy before scaling)."""
+    xi = np.asarray(xi, float)
+    return _tabulate_cached(family, degree, nderiv, xi.tobytes())
+
+
+@functools.lru_cache(maxsize=64)
+def _tabulate_cached(family, degree: int, nderiv: int, xi: bytes) -> np.ndarray:
     element = basix.create_element(family, basix.CellType.interval, degree)
-    tab = element.tabulate(nderiv, np.asarray(xi, float).reshape(-1, 1))
-    return np.asarray(tab[..., 0])        # (nderiv + 1, npoints, ndofs)
+    tab = np.array(element.tabulate(nderiv, np.frombuffer(xi).reshape(-1, 1))[..., 0])
+    tab.flags.writeable = False
+    return tab
 
 
 def hermite(xi: np.ndarray, le: float, nderiv: int = 2) -> np.ndarray:

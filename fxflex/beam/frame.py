@@ -179,10 +179,11 @@ def element_integral(dx: np.ndarray, N1: np.ndarray, A: np.ndarray, N2: np.ndarr
                      ) -> np.ndarray:
     """sum_q dx[e, q] N1[q]^T A[e, q] N2[q] (e, i, j): the element matrices of a section
     operator A (e, q, a, b) between shape-function tables N1 (q, a, i), N2 (q, b, j), by two
-    pairwise contractions (one four-operand einsum loops over all six indices at once: 18x
-    slower on 40 elements)."""
-    T = np.einsum("eqab,qbj->eqaj", dx[:, :, None, None] * A, N2)
-    return np.einsum("qai,eqaj->eij", N1, T)
+    batched matrix products and a sum over the points (one four-operand einsum loops over all
+    six indices at once: 18x slower on 40 elements; two pairwise einsums: 3-6x slower than the
+    products on 2-40 elements, a third of a beam level's build)."""
+    T = (dx[:, :, None, None] * A) @ N2
+    return (np.swapaxes(N1, -1, -2) @ T).sum(axis=1)
 
 
 class FloatingFrameBeam(FormulationBase):

@@ -29,14 +29,18 @@ def newton(residual, tangent, x0: np.ndarray, *, rtol: float = 1e-10, maxit: int
     x = np.array(x0, dtype=float)
     history: list[float] = []
     iterations = 0
-    r0 = np.linalg.norm(residual(np.zeros_like(x), 1.0))
-    ref = max(r0, np.linalg.norm(residual(x, 1.0))) if np.any(x) else r0
+    r_zero = residual(np.zeros_like(x), 1.0)
+    r0 = np.linalg.norm(r_zero)
+    r_start = residual(x, 1.0) if np.any(x) else r_zero
+    ref = max(r0, float(np.linalg.norm(r_start)))
     ref = ref if ref > 0 else 1.0
+    # the residual at x0 for s = 1 is already known: the first iteration does not recompute it
+    known = r_start if steps[0] == 1.0 else None
     converged = True
     for s in steps:
         ok = False
         for _ in range(maxit):
-            r = residual(x, s)
+            r, known = (residual(x, s) if known is None else known), None
             rn = float(np.linalg.norm(r))
             history.append(rn)
             if rn <= rtol * ref:
