@@ -107,6 +107,10 @@ class GeneralizedAlpha:
         #: as h^2, so the modified Newton contracts by about |1 - (h / h_f)^2| on the stiff modes:
         #: the contraction test and the renewal rule above decide whether the factor still pays.
         self.reuse_ratio = reuse_ratio
+        #: an absolute bound (m, Euclidean norm of the whole state) on the remaining Newton error
+        #: of a step, besides ``tol`` times its increment: the adaptive driver sets it per step
+        #: below the local error it allows (:mod:`fxflex.time.adaptive`, "Newton's share")
+        self.atol = math.inf
         self.stats = {"steps": 0, "iterations": 0, "factorizations": 0, "retries": 0,
                       "halvings": 0}
 
@@ -273,7 +277,7 @@ class GeneralizedAlpha:
                 return False, k
             # below the round-off of q the contraction means nothing: that is converged
             floor = _ROUNDOFF * size
-            target = max(self.tol * step, floor)
+            target = max(min(self.tol * step, self.atol), floor)
             if k == 1:
                 # the contraction is only measured from k = 2: trust an old one a few steps
                 eta = max(self._eta, 1e-16) ** 0.8 if self._eta_age < _ETA_AGE else math.inf
