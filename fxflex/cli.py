@@ -752,6 +752,14 @@ def _tol_report(args, scene, plan: _RunPlan, res, tol: dict | None) -> tuple[dic
                      "sample_dt_s": plan.sample_dt, "factorizations":
                      res.stats.get("factorizations"),
                      "estimate_kind": "Zienkiewicz-Xie local error per unit step, summed"}
+        worst = max(ad["error_estimate"])
+        if worst > plan.tol and res.diverged is None and not res.interrupted:
+            # the steps were held against max(peak so far, scale) (fxflex/time/adaptive.py)
+            plan.warnings.append(
+                f"--tol {plan.tol:g}: the tip's peak stayed below the scale the steps were held "
+                f"to (the equilibrium's |tip|, {ad['scale_m']:.3g} m): the estimated error is "
+                f"{worst:.3g} of the history's peak, above EPS; a longer run or a smaller EPS "
+                "holds it")
         line = (f"\n  --tol {plan.tol:g}: {ad['accepted']} steps, {ad['rejected']} rejected, dt "
                 f"{ad['h_min']:.3g}..{ad['h_max']:.3g} s; estimated time-integration error "
                 f"{max(ad['error_estimate']):.3g} of the peak")

@@ -59,8 +59,13 @@ contraction of the factor on it is measured, not trusted), so a step factor f wi
 2.7 s (a fixed 1 us run that meets EPS: 9.4 s), true error 3.9e-4 (estimate 6.6e-4); LEBB,
 FFRF, GCMS, ANCF likewise (docs/tolerance.md). A step whose Newton iteration fails (the scheme runs without
 halvings here) counts as a rejection with f = 1/4. The step never exceeds ``h_max`` (default
-T / 50: the estimate assumes the step resolves the response) and a step below ``H_FLOOR`` T
-stops the run as a Newton failure.
+T / 50: the estimate assumes the step resolves the response), except the last, which takes up
+to 1.1 h_max to land on t_end, and a step below ``H_FLOOR`` T stops the run as a Newton failure.
+
+The scale and the peak. The budget holds sum |e_tip| / s_n with s_n = max(peak so far, scale),
+so the reported estimate (over the history's peak) is within EPS whenever the peak reaches
+``scale``; a run that ends before it does (a short run, a slow spin-up) can report more than
+EPS, and ``fxflex run`` then says so in a warning.
 
 Newton's share. The step's modified Newton iteration stops with a remaining error dq in q (its
 own test: eta |dq| <= tol |q_{n+1} - q_n|, tol = 1e-5), and a_{n+1} carries dq / (h^2 beta), so
@@ -71,9 +76,16 @@ node (100 m/s at the default blade's tip at 1000 rpm), so 1e-5 of it is tens of 
 error EPS s h / T that the controller allows, and the controller shrank the step to chase
 Newton's error: TLF Q2 16x2x2 at 1000 rpm, 2 ms at EPS 1e-3 took 2423 steps with tol = 1e-5
 and 247 with tol = 1e-9. So the driver also bounds Newton's remaining error (the Euclidean norm
-over the whole state, which bounds the tip's) by NEWTON_SHARE of the error it allows the step,
+over the whole state, which bounds the tip's in nodal coordinates; for the mass-normalised modal
+amplitudes of FFRF / GCMS it bounds it for a blade above a few kilograms, and there the
+increment is small anyway) by NEWTON_SHARE of the error it allows the step,
 ``GeneralizedAlpha.atol`` = NEWTON_SHARE EPS s h / T: the same run then takes 272 steps, 2.4
-iterations a step instead of 2.0.
+iterations a step instead of 2.0. Newton's test never asks for less than q's round-off,
+1e-13 |q| (|q| is tens of metres in absolute coordinates once the blade has turned), so there a
+floor of about 0.8e-13 |q| / s T / h remains in r, which grows as the step shrinks: a small
+enough EPS would drive the step to H_FLOOR (the run then stops as a Newton failure). Not reached
+in the runs measured: TLF Q2 16x2x2, 10 ms at 1000 rpm, completes at EPS 1e-4 and 1e-5 (8637 and
+27449 steps, the ratio sqrt(10) of an h^2 error; 2.0 iterations a step).
 
 Sampling. Rows are written at t0 + k sample_dt and at t_end whatever the steps: inside a step,
 q and v come from the cubic Hermite interpolant of (q_n, v_n, q_{n+1}, v_{n+1}) (error O(h^4),
@@ -106,7 +118,8 @@ from fxflex.time.driver import GROWTH_POINTS, RunResult, divergence_limit
 from fxflex.time.generalized_alpha import GeneralizedAlpha, NewtonFailure
 
 __all__ = ["Clock", "simulate_adaptive", "explicit_step", "SAFETY", "KAPPA", "GROW_MAX",
-           "SHRINK_MIN", "H_FLOOR", "EXPLICIT_MARGIN", "MAX_EXPLICIT_STEPS", "local_error_factor"]
+           "SHRINK_MIN", "R_CAP", "SMOOTHING", "HOLD", "NEWTON_SHARE", "H_FLOOR",
+           "EXPLICIT_MARGIN", "MAX_EXPLICIT_STEPS", "local_error_factor"]
 
 SAFETY = 0.9
 #: the sum of the local displacement errors against the error of the history it leaves
@@ -147,7 +160,7 @@ class Clock:
     h_max: float = 0.0
     factor_changes: int = 0   # steps whose size differed from the previous one
     newton_failures: int = 0  # of the rejected steps, those whose Newton iteration failed
-    used: float = 0.0         # sum over the accepted steps of |e_tip| / s (the error budget spent)
+    used: float | None = 0.0  # sum over the accepted steps of |e_tip| / s (the error budget spent)
     r_smooth: float = 0.0     # the smoothed r (0: none yet) ...
     h_smooth: float = 1.0     # ... at this step size (s)
 
@@ -158,8 +171,11 @@ class Clock:
 
     @classmethod
     def from_dict(cls, d: dict) -> "Clock":
+        """A clock from :meth:`to_dict`; ``used`` is None when the checkpoint predates the
+        budget (:func:`simulate_adaptive` then counts the budget as spent up to its time)."""
         d = dict(d)
         d["h_min"] = math.inf if d.get("h_min") is None else d["h_min"]
+        d.setdefault("used", None)
         return cls(**d)
 
 
@@ -289,6 +305,8 @@ def simulate_adaptive(form, eps: float, t_end: float, *, h0: float, scale: float
             if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
                 raise ValueError("simulate_adaptive: the state to resume from holds NaN or inf")
             scheme.resume(form, clock.t, clock.h, q, v, arrays)
+            if clock.used is None:          # a checkpoint of the rule before the budget, which
+                clock.used = eps * (clock.t - t0) / span    # held r <= EPS: at most this
         try:
             while diverged is None and clock.t < t_end:
                 t = clock.t

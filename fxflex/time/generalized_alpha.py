@@ -38,7 +38,9 @@ eta is the last measured one to the power 0.8, for at most 8 steps in a row, so 
 that ages while the tangent changes is caught by the next measurement. A factor is renewed when
 the extra iterations it has cost since it was made (beyond those of its first step) add up to the
 measured cost of a factorisation, or when theta > 1/2. Corrections below 1e-13 |q| are round-off
-and count as converged whatever the contraction says.
+and count as converged whatever the contraction says. ``atol`` (set per step by the adaptive
+driver, :mod:`fxflex.time.adaptive`) bounds eta_k |dq_k| in metres as well: the test is then
+eta_k |dq_k| <= max(min(tol |q_{n+1} - q_n|, atol), 1e-13 |q|).
 
 Fallback. A step whose Newton iteration does not converge (theta >= 1, a non-finite residual, or
 ``max_iter`` iterations) with a factor made at an earlier step is retried with a fresh one; if it
@@ -282,8 +284,12 @@ class GeneralizedAlpha:
                 # the contraction is only measured from k = 2: trust an old one a few steps
                 eta = max(self._eta, 1e-16) ** 0.8 if self._eta_age < _ETA_AGE else math.inf
             elif corr <= floor:
+                # converged to round-off: corr / prev bounds the contraction from above (the true
+                # correction is below round-off), and that bound is what k = 1 trusts next (not
+                # 0, which would accept any first correction)
+                theta = min(corr / prev, 0.5) if prev > 0.0 else 0.5
                 eta = 0.0
-                self._eta, self._eta_age = 0.0, 0
+                self._eta, self._eta_age = theta / (1.0 - theta), 0
             else:
                 theta = corr / prev
                 self.last_theta = theta
