@@ -294,6 +294,9 @@ class FormulationBase:
     field_writer = None
     state_points = None
     rotating_state = None
+    #: Newton's relative residual for steady_state() (the methods that iterate: TLF, NEBB, ANCF);
+    #: the ``--tol`` ladder loosens it to what EPS needs (fxflex.analysis.tolerance, NEWTON_EPS)
+    steady_rtol: float = 1e-10
     _linear: Linearisation | None = None
 
     def probes(self) -> dict[str, bool]:

@@ -446,9 +446,9 @@ class ANCF(FormulationBase):
         omega = self.scene.rotation.omega
         tangent = lambda x, s: self._effective_stiffness(self._full(x), math.sqrt(s) * omega)
         x0 = self.e0[self.free_dofs]
-        x, its, hist, ok = newton(self._static_residual, tangent, x0)
+        x, its, hist, ok = newton(self._static_residual, tangent, x0, rtol=self.steady_rtol)
         if not ok:
-            x, its, hist, ok = newton(self._static_residual, tangent, x0,
+            x, its, hist, ok = newton(self._static_residual, tangent, x0, rtol=self.steady_rtol,
                                       steps=tuple(np.linspace(0.1, 1.0, 10)))
         e = self._full(x)
         self._steady = SteadyState(tip=e[self.tip_dofs] - self.e0[self.tip_dofs], q=e,

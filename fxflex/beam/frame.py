@@ -506,15 +506,17 @@ class FloatingFrameBeam(FormulationBase):
         omega = self.scene.rotation.omega
         tangent = lambda W, s: self._stiffness(W, np.sqrt(s) * omega)
         start, extra = self.steady_start, {}
+        rtol = self.steady_rtol
         if start is not None:                     # a guess (nested iteration): else from rest
-            W, its, hist, ok = newton(self._static_residual, tangent, start)
+            W, its, hist, ok = newton(self._static_residual, tangent, start, rtol=rtol)
             if not ok:
                 start, extra = None, {"cold_fallback": True}
         if start is None:
-            W, its, hist, ok = newton(self._static_residual, tangent, np.zeros(self.dof))
+            W, its, hist, ok = newton(self._static_residual, tangent, np.zeros(self.dof),
+                                      rtol=rtol)
         if not ok and self.nonlinear:
             W, its, hist, ok = newton(self._static_residual, tangent, np.zeros(self.dof),
-                                      steps=tuple(np.linspace(0.1, 1.0, 10)))
+                                      steps=tuple(np.linspace(0.1, 1.0, 10)), rtol=rtol)
         self._steady = SteadyState(tip=self.tip(0.0, W), q=W, iterations=its, residuals=hist,
                                    converged=ok, timings={"steady": time.perf_counter() - t0},
                                    extra=extra)

@@ -145,9 +145,10 @@ class TLF(FormulationBase):
             if self.sweep is not None:
                 self._steady = self.sweep.steady(self, linear)
             else:
-                st = tlf_steady(self.model, linear=linear, start=self.steady_start)
+                rtol = self.steady_rtol
+                st = tlf_steady(self.model, linear=linear, start=self.steady_start, rtol=rtol)
                 if not st.converged and self.steady_start is not None:
-                    st = tlf_steady(self.model, linear=linear)      # the guess failed: cold
+                    st = tlf_steady(self.model, linear=linear, rtol=rtol)   # the guess failed
                     st.extra["cold_fallback"] = True
                 self._steady = st
         return self._steady

@@ -447,3 +447,24 @@ def test_beam_ladder_skips_a_first_level_too_twisted_and_reaches_its_last(method
         out = steady_to_tolerance("nebb", sc, MPI.COMM_WORLD, 3e-7)
         counts = [lv["discretisation"]["elements"] for lv in out["levels"]]
         assert counts[-1] == 256 and max(out["estimate"]) < 3e-7
+
+
+@pytest.mark.parametrize("method", ["nebb", "tlf"])
+def test_levels_are_solved_to_what_eps_needs(method):
+    """A level's equilibrium is solved to a Newton residual of NEWTON_EPS EPS (relative to the
+    load's) rather than the default 1e-10: the result of the ladder then differs from the same
+    discretisation solved to 1e-10 by far less than EPS (bound 1e-3 EPS; measured 1.8e-10 of
+    |tip| for NEBB, 2.3e-12 for TLF at EPS 1e-2, 5000 rpm: Newton converges quadratically, so
+    the last iteration leaves far less than its bound)."""
+    from fxflex.analysis.tolerance import NEWTON_EPS, steady_to_tolerance
+
+    eps = 1e-2
+    scene = scene_from_dict({"rotation": {"rpm": 5000}}, base=Scene())
+    out = steady_to_tolerance(method, scene, MPI.COMM_WORLD, eps, max_levels=3)
+    loose = out["best"]["form"]
+    assert loose.steady_rtol == pytest.approx(NEWTON_EPS * eps)
+    tight = build(method, out["scene"], MPI.COMM_WORLD)
+    assert tight.steady_rtol == 1e-10
+    ref = tight.steady_state()
+    tip = np.asarray(out["best"]["steady"].tip)
+    assert np.linalg.norm(tip - ref.tip) < 1e-3 * eps * np.linalg.norm(ref.tip)
