@@ -294,8 +294,10 @@ class FormulationBase:
     field_writer = None
     state_points = None
     rotating_state = None
-    #: Newton's relative residual for steady_state() (the methods that iterate: TLF, NEBB, ANCF);
-    #: the ``--tol`` ladder loosens it to what EPS needs (fxflex.analysis.tolerance, NEWTON_EPS)
+    #: Newton's relative residual for steady_state() (the methods that iterate: TLF, NEBB, ANCF),
+    #: each against its own reference residual (TLF: the undeformed body's; NEBB: at W = 0; ANCF:
+    #: at x = 0, a collapsed body's); the ``--tol`` ladder loosens it for TLF and NEBB to what EPS
+    #: needs (fxflex.analysis.tolerance, NEWTON_EPS)
     steady_rtol: float = 1e-10
     _linear: Linearisation | None = None
 

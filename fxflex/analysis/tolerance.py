@@ -93,7 +93,7 @@ MAX_PREDICTED = 16
 MAX_DOF = 100_000
 #: a level's equilibrium is solved to a Newton residual of NEWTON_EPS EPS relative to the load's
 #: (at least the default 1e-10): its error, of that relative size, stays far below the
-#: discretisation error the ladder estimates (docs/tolerance.md, "Newton to EPS")
+#: discretisation error the ladder estimates (module docstring, "Newton to EPS")
 NEWTON_EPS = 1e-4
 #: the methods whose Newton residual is measured against the load's (TLF: the undeformed body's
 #: residual; NEBB: the residual at W = 0). ANCF's dense Newton measures it against the residual
@@ -301,6 +301,7 @@ class Refiner:
             if not st.converged:
                 raise FxflexError(f"--tol: the {self.method} equilibrium on "
                                   f"{describe(scene, self.method)} did not converge")
+            st.extra["newton_rtol"] = form.steady_rtol   # what it was solved to (NEWTON_EPS)
             values = [float(x) for x in st.tip]
             extra = {"steady": st}
         else:
@@ -325,7 +326,11 @@ def _public(row: dict, what: str) -> dict:
 def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: int | None,
             max_dof: int, log, predicted: bool = True) -> dict:
     method = refiner.method
-    refiner.steady_rtol = max(1e-10, NEWTON_EPS * eps)
+    rtol = max(1e-10, NEWTON_EPS * eps)
+    if refiner.steady_rtol != rtol:           # levels solved to another tolerance: not reused
+        refiner.done.clear()
+        refiner._last.clear()
+        refiner.steady_rtol = rtol
     steps = ladder(method, scene)
     beam_steps = predicted and method not in SOLIDS and what == "steady"
     # the predicted beam levels may be more than the doublings' (1.5x a level at least): the

@@ -56,7 +56,7 @@ def newton(residual, tangent, x0: np.ndarray, *, rtol: float = 1e-10, maxit: int
             iterations += 1
             if np.linalg.norm(dx) <= 1e-14 * max(np.linalg.norm(x), 1e-300):
                 history.append(float(np.linalg.norm(residual(x, s))))
-                ok = history[-1] <= 1e3 * rtol * ref
+                ok = history[-1] <= min(1e3 * rtol, max(rtol, 1e-7)) * ref
                 break
         converged = converged and ok
         if not np.all(np.isfinite(x)):

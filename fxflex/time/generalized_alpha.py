@@ -284,10 +284,10 @@ class GeneralizedAlpha:
                 # the contraction is only measured from k = 2: trust an old one a few steps
                 eta = max(self._eta, 1e-16) ** 0.8 if self._eta_age < _ETA_AGE else math.inf
             elif corr <= floor:
-                # converged to round-off: corr / prev bounds the contraction from above (the true
-                # correction is below round-off), and that bound is what k = 1 trusts next (not
-                # 0, which would accept any first correction)
-                theta = min(corr / prev, 0.5) if prev > 0.0 else 0.5
+                # converged to round-off: the true correction is below the floor, so floor / prev
+                # bounds the contraction from above, and that bound is what k = 1 trusts next
+                # (not 0, which would accept any first correction)
+                theta = min(max(corr, floor) / prev, 0.5) if prev > 0.0 else 0.5
                 eta = 0.0
                 self._eta, self._eta_age = theta / (1.0 - theta), 0
             else:

@@ -302,3 +302,26 @@ def test_a_singular_iteration_matrix_cuts_the_step():
     res = simulate(form, "generalized-alpha", 1e-3, 0.01, limit=10.0)
     assert res.diverged is None and res.stats["halvings"] == 1 and res.steps == 10
     assert calls[1] == pytest.approx(calls[0] / 4)       # k ~ h^2: the half step's factor
+
+
+def test_round_off_convergence_is_not_trusted_as_a_zero_contraction():
+    """After an iteration that converged to round-off (a linear system, an exact factor: the
+    second correction is below 1e-13 |q|), the contraction trusted at k = 1 of the next steps is
+    the bound that round-off gives, floor / previous correction, not 0: with 0 the next step's
+    first correction was accepted whatever its size, so a tight ``atol`` (the adaptive driver's
+    bound on Newton's error) was bypassed. Here the first step converges at k = 2 to round-off;
+    with atol tiny the next step must iterate again, where a trusted 0 took one iteration."""
+    form = Chain()
+    scheme = GeneralizedAlpha(0.9)
+    q, v = form.initial_state()
+    scheme.begin(form, 0.0, q, v)
+    scheme.step(form, 0.0, 0.01, q, v)
+    assert scheme.stats["iterations"] == 2 and 0.0 < scheme._eta < 1e-6
+    scheme.atol = 1e-300
+    before = scheme.stats["iterations"]
+    scheme.step(form, 0.01, 0.01, q, v)
+    assert scheme.stats["iterations"] - before >= 2
+    scheme.atol = math.inf                  # the default test: one iteration on the trusted bound
+    before = scheme.stats["iterations"]
+    scheme.step(form, 0.02, 0.01, q, v)
+    assert scheme.stats["iterations"] - before == 1
