@@ -301,7 +301,8 @@ class Refiner:
             if not st.converged:
                 raise FxflexError(f"--tol: the {self.method} equilibrium on "
                                   f"{describe(scene, self.method)} did not converge")
-            st.extra["newton_rtol"] = form.steady_rtol   # what it was solved to (NEWTON_EPS)
+            if self.method in LOOSE_NEWTON:       # what it was solved to (NEWTON_EPS)
+                st.extra["newton_rtol"] = form.steady_rtol
             values = [float(x) for x in st.tip]
             extra = {"steady": st}
         else:
@@ -326,8 +327,8 @@ def _public(row: dict, what: str) -> dict:
 def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: int | None,
             max_dof: int, log, predicted: bool = True) -> dict:
     method = refiner.method
-    rtol = max(1e-10, NEWTON_EPS * eps)
-    if refiner.steady_rtol != rtol:           # levels solved to another tolerance: not reused
+    rtol = float(f"{max(1e-10, NEWTON_EPS * eps):.3g}")
+    if refiner.steady_rtol != rtol and method in LOOSE_NEWTON:   # solved to another: not reused
         refiner.done.clear()
         refiner._last.clear()
         refiner.steady_rtol = rtol

@@ -287,7 +287,7 @@ class GeneralizedAlpha:
                 # converged to round-off: the true correction is below the floor, so floor / prev
                 # bounds the contraction from above, and that bound is what k = 1 trusts next
                 # (not 0, which would accept any first correction)
-                theta = min(max(corr, floor) / prev, 0.5) if prev > 0.0 else 0.5
+                theta = min(floor / prev, 0.5) if prev > 0.0 else 0.5
                 eta = 0.0
                 self._eta, self._eta_age = theta / (1.0 - theta), 0
             else:

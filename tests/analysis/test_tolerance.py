@@ -450,17 +450,30 @@ def test_beam_ladder_skips_a_first_level_too_twisted_and_reaches_its_last(method
 
 
 @pytest.mark.parametrize("method", ["nebb", "tlf"])
-def test_levels_are_solved_to_what_eps_needs(method):
+def test_levels_are_solved_to_what_eps_needs(method, monkeypatch):
     """A level's equilibrium is solved to a Newton residual of NEWTON_EPS EPS (relative to the
     load's) rather than the default 1e-10: the result of the ladder then differs from the same
     discretisation solved to 1e-10 by far less than EPS (bound 1e-3 EPS; measured 1.8e-10 of
     |tip| for NEBB, 2.3e-12 for TLF at EPS 1e-2, 5000 rpm: Newton converges quadratically, so
     the last iteration leaves far less than its bound)."""
+    import fxflex.beam.frame
+    import fxflex.solid.tlf
     from fxflex.analysis.tolerance import NEWTON_EPS, steady_to_tolerance
 
+    # the tolerance each level's solver is called with (the solvers wrapped, not replaced)
+    module, name = ((fxflex.beam.frame, "newton") if method == "nebb"
+                    else (fxflex.solid.tlf, "tlf_steady"))
+    solver, asked = getattr(module, name), []
+
+    def spy(*args, rtol=1e-10, **kwargs):
+        asked.append(rtol)
+        return solver(*args, rtol=rtol, **kwargs)
+
+    monkeypatch.setattr(module, name, spy)
     eps = 1e-2
     scene = scene_from_dict({"rotation": {"rpm": 5000}}, base=Scene())
     out = steady_to_tolerance(method, scene, MPI.COMM_WORLD, eps, max_levels=3)
+    assert asked and all(r == pytest.approx(NEWTON_EPS * eps) for r in asked)
     loose = out["best"]["form"]
     assert loose.steady_rtol == pytest.approx(NEWTON_EPS * eps)
     tight = build(method, out["scene"], MPI.COMM_WORLD)
@@ -468,12 +481,7 @@ def test_levels_are_solved_to_what_eps_needs(method):
     ref = tight.steady_state()
     tip = np.asarray(out["best"]["steady"].tip)
     assert np.linalg.norm(tip - ref.tip) < 1e-3 * eps * np.linalg.norm(ref.tip)
-    assert out["best"]["steady"].extra["newton_rtol"] == loose.steady_rtol
-    # the looser tolerance reaches the solver: from the same guess, 1e-10 takes an iteration more
-    # (measured 2 against 3 for both here)
-    seeded = build(method, out["scene"], MPI.COMM_WORLD)
-    seeded.steady_start = loose.steady_start
-    assert out["best"]["steady"].iterations < seeded.steady_state().iterations
+    assert "newton_rtol" in out["best"]["steady"].extra
 
 
 def test_a_refiner_reused_at_another_eps_solves_its_levels_again():
