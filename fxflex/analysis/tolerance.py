@@ -241,6 +241,14 @@ class Refiner:
         #: set by the ladder from EPS, NEWTON_EPS)
         self.steady_rtol: float | None = None
 
+    def solve_to(self, rtol: float) -> None:
+        """The Newton tolerance of the levels' equilibria (NEWTON_EPS; TLF, NEBB only): levels
+        kept from another tolerance are dropped, not reused."""
+        if self.method in LOOSE_NEWTON and rtol != self.steady_rtol:
+            self.done.clear()
+            self._last.clear()
+            self.steady_rtol = rtol
+
     def level(self, scene: Scene, what: str) -> dict:
         """One level: ``what`` = "steady" (tip, m) or "modes" (frequencies, Hz)."""
         from fxflex.formulation import build
@@ -250,7 +258,7 @@ class Refiner:
             return self.done[key]
         t0 = time.perf_counter()
         form = build(self.method, scene, self.comm, self.options)
-        if self.steady_rtol is not None and self.method in LOOSE_NEWTON:
+        if self.steady_rtol is not None:                # set by solve_to: TLF, NEBB
             form.steady_rtol = self.steady_rtol
         if self.method in ("tlf", "nebb"):
             self._seed(form, what)
@@ -327,11 +335,7 @@ def _public(row: dict, what: str) -> dict:
 def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: int | None,
             max_dof: int, log, predicted: bool = True) -> dict:
     method = refiner.method
-    rtol = float(f"{max(1e-10, NEWTON_EPS * eps):.3g}")
-    if refiner.steady_rtol != rtol and method in LOOSE_NEWTON:   # solved to another: not reused
-        refiner.done.clear()
-        refiner._last.clear()
-        refiner.steady_rtol = rtol
+    refiner.solve_to(float(f"{max(1e-10, NEWTON_EPS * eps):.3g}"))
     steps = ladder(method, scene)
     beam_steps = predicted and method not in SOLIDS and what == "steady"
     # the predicted beam levels may be more than the doublings' (1.5x a level at least): the

@@ -57,8 +57,8 @@ contraction of the factor on it is measured, not trusted), so a step factor f wi
 (the budget takes the r that a held step leaves up to 2x away from the target). TLF Q2
 16x2x2, 1000 rpm, 10 ms, 1e-3: 2.7 -> 1.1 iterations a step, 92 -> 15 factorisations, 8.8 s ->
 2.7 s (a fixed 1 us run that meets EPS: 9.4 s), true error 3.9e-4 (estimate 6.6e-4); LEBB,
-FFRF, GCMS, ANCF likewise (docs/tolerance.md). A step whose Newton iteration fails (the scheme runs without
-halvings here) counts as a rejection with f = 1/4. The step never exceeds ``h_max`` (default
+FFRF, GCMS, ANCF likewise (docs/tolerance.md). A step whose Newton iteration fails (the scheme
+runs without halvings here) counts as a rejection with f = 1/4. The step never exceeds ``h_max`` (default
 T / 50: the estimate assumes the step resolves the response), except the last, which takes up
 to 1.1 h_max to land on t_end, and a step below ``H_FLOOR`` T stops the run as a Newton failure.
 
@@ -101,8 +101,8 @@ then ended at 0.6-0.8 EPS (docs/tolerance.md). Runs much longer than 10 ms are n
 that measurement.
 
 Checkpoints and resume. The controller's state (:class:`Clock`: time, next step, peak, counters,
-accumulated estimate, budget spent, smoothed r) goes into the checkpoint with the state and the scheme's history, so a
-resumed run tries the same next step as the uninterrupted one. Both agree to the Newton
+accumulated estimate, budget spent, smoothed r) goes into the checkpoint with the state and the
+scheme's history, so a resumed run tries the same next step as the uninterrupted one. Both agree to the Newton
 tolerance, not bit for bit (the resumed run starts with a fresh factor, as for fixed steps).
 """
 
