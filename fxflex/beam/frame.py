@@ -67,23 +67,47 @@ NZ[0, 4], NZ[1, 3] = 1.0, -1.0
 _EX, _EY, _EZ = np.eye(3)
 
 
+#: the constant matrices of :func:`section_quadratic` / :func:`section_linear` per Q (a beam
+#: build uses three Q; recomputing their 6 x 6 products was a tenth of a small build)
+_SECTION_TERMS: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _section_terms(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(6, 36) and (8, 6): the matrices that multiply A, S_Z, S_Y, I_Z, I_Y, I_YZ in
+    :func:`section_quadratic` and A X, S_Z X, S_Z, S_Y X, S_Y, I_Z, I_Y, I_YZ in
+    :func:`section_linear`."""
+    Q = np.asarray(Q, float)
+    key = Q.tobytes()
+    if key not in _SECTION_TERMS:
+        def sym(a, b):
+            return a.T @ Q @ b + b.T @ Q @ a
+        quad = np.array([N0.T @ Q @ N0, sym(N0, NY), sym(N0, NZ), NY.T @ Q @ NY, NZ.T @ Q @ NZ,
+                         sym(NY, NZ)]).reshape(6, 36)
+        lin = np.array([N0.T @ Q @ _EX, NY.T @ Q @ _EX, N0.T @ Q @ _EY, NZ.T @ Q @ _EX,
+                        N0.T @ Q @ _EZ, NY.T @ Q @ _EY, NZ.T @ Q @ _EZ,
+                        NY.T @ Q @ _EZ + NZ.T @ Q @ _EY])
+        _SECTION_TERMS[key] = (quad, lin)
+    return _SECTION_TERMS[key]
+
+
 def section_quadratic(Q: np.ndarray, sec) -> np.ndarray:
-    """int_A N_c^T Q N_c dA (6 x 6 at every station) for a constant 3 x 3 matrix Q."""
-    def sym(a, b):
-        return a.T @ Q @ b + b.T @ Q @ a
-    terms = ((sec.A, N0.T @ Q @ N0), (sec.S_Z, sym(N0, NY)), (sec.S_Y, sym(N0, NZ)),
-             (sec.I_Z, NY.T @ Q @ NY), (sec.I_Y, NZ.T @ Q @ NZ), (sec.I_YZ, sym(NY, NZ)))
-    return sum(np.asarray(c)[..., None, None] * m for c, m in terms)
+    """int_A N_c^T Q N_c dA (6 x 6 at every station) for a constant 3 x 3 matrix Q:
+    A N0^T Q N0 + S_Z sym(N0, NY) + S_Y sym(N0, NZ) + I_Z NY^T Q NY + I_Y NZ^T Q NZ
+    + I_YZ sym(NY, NZ), sym(a, b) = a^T Q b + b^T Q a."""
+    quad, _ = _section_terms(Q)
+    c = np.stack([sec.A, sec.S_Z, sec.S_Y, sec.I_Z, sec.I_Y, sec.I_YZ], axis=-1)
+    return (c @ quad).reshape(c.shape[:-1] + (6, 6))
 
 
 def section_linear(Q: np.ndarray, sec, X: np.ndarray) -> np.ndarray:
-    """int_A N_c^T Q X0 dA (6-vector at every station), X0 = (X, Y0, Z0), X = R + x."""
-    X = np.asarray(X)[..., None]
-    return (sec.A[..., None] * X * (N0.T @ Q @ _EX)
-            + sec.S_Z[..., None] * (X * (NY.T @ Q @ _EX) + N0.T @ Q @ _EY)
-            + sec.S_Y[..., None] * (X * (NZ.T @ Q @ _EX) + N0.T @ Q @ _EZ)
-            + sec.I_Z[..., None] * (NY.T @ Q @ _EY) + sec.I_Y[..., None] * (NZ.T @ Q @ _EZ)
-            + sec.I_YZ[..., None] * (NY.T @ Q @ _EZ + NZ.T @ Q @ _EY))
+    """int_A N_c^T Q X0 dA (6-vector at every station), X0 = (X, Y0, Z0), X = R + x:
+    A X N0^T Q e_X + S_Z (X NY^T Q e_X + N0^T Q e_Y) + S_Y (X NZ^T Q e_X + N0^T Q e_Z)
+    + I_Z NY^T Q e_Y + I_Y NZ^T Q e_Z + I_YZ (NY^T Q e_Z + NZ^T Q e_Y)."""
+    _, lin = _section_terms(Q)
+    X = np.asarray(X)
+    c = np.stack([sec.A * X, sec.S_Z * X, sec.S_Z, sec.S_Y * X, sec.S_Y, sec.I_Z, sec.I_Y,
+                  sec.I_YZ], axis=-1)
+    return c @ lin
 
 
 #: [e_k]x, the cross-product matrices of the axes: theta x r = -sum_k r_k [e_k]x theta
@@ -212,7 +236,9 @@ class FloatingFrameBeam(FormulationBase):
         Ne = tab.N
         integral = lambda A6: rho * element_integral(dx, Ne, A6, Ne)
         mass = lambda Q: integral(section_quadratic(Q, sec))
-        vec = lambda Q: rho * np.einsum("eq,qai,eqa->ei", dx, Ne, section_linear(Q, sec, X))
+        NeF = Ne.reshape(-1, Ne.shape[-1])                     # (q a, i)
+        vec = lambda Q: rho * ((dx[..., None] * section_linear(Q, sec, X)).reshape(
+            dx.shape[0], -1) @ NeF)                            # sum_qa dx N^T (int N_c^T Q X0)
         self.Me, Ge, Nme = mass(np.eye(3)), mass(S3), mass(P3)
         second = method == "nebb"            # the propeller moment (module docstring)
         if second:
@@ -250,18 +276,10 @@ class FloatingFrameBeam(FormulationBase):
         self.ftip = np.zeros(self.dof)
         self.ftip[-6:-3] = scene.load.tip_force
         self.timings = {"assemble": time.perf_counter() - t0}
-        t1 = time.perf_counter()
-        Minv = np.linalg.inv(self.M)
-        self.Minv = 0.5 * (Minv + Minv.T)
-        self.MiK, self.MiG, self.MiN = self.Minv @ self.K, self.Minv @ self.G, self.Minv @ self.N
         # NEBB: the Euler force's share of the second-order rotation, with phi'' (symmetric)
         self.GS = np.ascontiguousarray(full["GS"][f, f]) if second else None
-        self.MiGS = self.Minv @ self.GS if second else None
-        self.Mi_fq, self.Mi_tip = self.Minv @ self.fq, self.Minv @ self.ftip
-        self.Mi_load = self.Mi_fq + self.Mi_tip          # both follow the load ramp
         self.load = self.fq + self.ftip
         self.at_rest = self.drive.at_rest                # no Coriolis, no inertia loads
-        self.Mi_g, self.Mi_n = self.Minv @ self.g, self.Minv @ self.n
         n = self.dof
         self._Kq, self._Cv, self._nn = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
         self._f = np.zeros(n)
@@ -277,9 +295,36 @@ class FloatingFrameBeam(FormulationBase):
         self._Keff, self._Ceff, self._feff = np.zeros((n, n)), np.zeros((n, n)), np.zeros(n)
         self._fkey = None
         self._lu: DenseLU | None = None
-        self.timings["factorise"] = time.perf_counter() - t1
         self._steady: SteadyState | None = None
         self._omega_max: float | None = None
+
+    #: the explicit time loop's M^-1 products (:meth:`_explicit_matrices`)
+    _EXPLICIT = frozenset({"Minv", "MiK", "MiG", "MiN", "MiGS", "Mi_fq", "Mi_tip", "Mi_load",
+                           "Mi_g", "Mi_n"})
+
+    def __getattr__(self, name: str):
+        """The M^-1 products on first use (a steady state, modes or an implicit run never
+        needs them: a tenth to a fifth of a small build)."""
+        if name in type(self)._EXPLICIT and "M" in self.__dict__:
+            self._explicit_matrices()
+            return self.__dict__[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def _explicit_matrices(self) -> None:
+        """M^-1 (symmetrised) and its products with K, G, N, GS and the load vectors: what
+        :meth:`acceleration` multiplies (timed as ``factorise``)."""
+        if "Minv" in self.__dict__:
+            return
+        t1 = time.perf_counter()
+        Minv = np.linalg.inv(self.M)
+        Minv = 0.5 * (Minv + Minv.T)
+        self.MiK, self.MiG, self.MiN = Minv @ self.K, Minv @ self.G, Minv @ self.N
+        self.MiGS = Minv @ self.GS if self.GS is not None else None
+        self.Mi_fq, self.Mi_tip = Minv @ self.fq, Minv @ self.ftip
+        self.Mi_load = self.Mi_fq + self.Mi_tip          # both follow the load ramp
+        self.Mi_g, self.Mi_n = Minv @ self.g, Minv @ self.n
+        self.Minv = Minv
+        self.timings["factorise"] = time.perf_counter() - t1
 
     # ------------------------------------------------------------------ nonlinear hooks (NEBB)
     nonlinear = False
@@ -297,7 +342,9 @@ class FloatingFrameBeam(FormulationBase):
 
     # ------------------------------------------------------------------ protocol
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """Undeformed and at rest relative to the frame: W = 0, W' = 0."""
+        """Undeformed and at rest relative to the frame: W = 0, W' = 0. A time loop follows:
+        the M^-1 products are made here, before its clock starts."""
+        self._explicit_matrices()
         return np.zeros(self.dof), np.zeros(self.dof)
 
     def constrain(self, t: float, q: np.ndarray, v: np.ndarray) -> None:
@@ -489,7 +536,7 @@ class FloatingFrameBeam(FormulationBase):
         r = (self.K - rate**2 * self.N) @ W - s * (self.fq + self.ftip) - rate**2 * self.n
         if self.absolute:
             r += self.c_rho * rate * self.G @ W
-        if self.nonlinear:
+        if self.nonlinear and W.any():          # Q_N(0) = 0 (Newton's reference residual)
             Wf, QN = np.zeros(self.n_full), np.zeros(self.n_full)
             Wf[6:] = W
             self.add_static_force(Wf, QN)

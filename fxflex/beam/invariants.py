@@ -223,6 +223,7 @@ class GramChain:
         self.eX = np.zeros((n, ne * ms, nc))
         self.eY = np.zeros((n, ms**3, nc))
         self.eC = np.zeros((n, ms, nc, ms, nc))
+        self.eYB = np.zeros((n, ms * ms * nc, nc))
         self.eCR = np.zeros((n, ms * nc, ne))
         self.eK = np.zeros((n, ne, ne))
         self.eW = np.zeros((n, ne, ne))
@@ -254,8 +255,10 @@ class GramChain:
         # u_de^T K_N3e u_de = R^T C R, C[(p,i),(s,j)] = 1/2 sum_qr T4[p,q,r,s] B[q,i] B[r,j]
         # (eC holds the sum without the 1/2)
         np.matmul(self.T4e.reshape(n, ms**3, ms), B, out=self.eY)      # Y[r,s,p,i]
-        Y = self.eY.reshape(n, ms, ms, ms, nc)
-        np.einsum("erspi,erj->episj", Y, B, out=self.eC)
+        # C[p,i,s,j] = sum_r Y[r,s,p,i] B[r,j]: a batched product, then the axes in place (the
+        # five-index einsum: 2.5-6x slower on 2-40 elements)
+        np.matmul(self.eY.reshape(n, ms, ms * ms * nc).transpose(0, 2, 1), B, out=self.eYB)
+        self.eC[...] = self.eYB.reshape(n, ms, ms, nc, nc).transpose(0, 2, 3, 1, 4)
         np.matmul(self.eC.reshape(n, ms * nc, ms * nc), self.R, out=self.eCR)
         np.matmul(self.R.T, self.eCR, out=self.eW)
         self.eW *= 0.5
@@ -282,12 +285,14 @@ class GramChain:
         ue = self.element_views(u)
         X = self.eX.reshape(n, ne, ms * nc)
         C2 = self.eC.reshape(n, ms * nc, ms * nc)            # 2 C (not halved)
-        S1 = np.einsum("ek,ekpq->epq", ue, self.T1e)
+        S1 = ue[:, None, :] @ self.T1e.reshape(n, ne, ms * ms)           # (n, 1, ms ms)
         P = np.matmul(B, B.transpose(0, 2, 1))
-        S4 = np.einsum("epqrs,ers->epq", self.T4e, P)
-        eye = np.eye(nc)
-        inner = C2 + np.einsum("epq,ij->epiqj", S1 + 0.5 * S4, eye).reshape(n, ms * nc,
-                                                                                 ms * nc)
+        S4 = self.T4e.reshape(n, ms * ms, ms * ms) @ P.reshape(n, ms * ms, 1)
+        S = (S1[:, 0, :] + 0.5 * S4[..., 0]).reshape(n, ms, ms)
+        diag = np.zeros((n, ms, nc, ms, nc))                              # S x I (Kronecker)
+        for i in range(nc):
+            diag[:, :, i, :, i] = S
+        inner = C2 + diag.reshape(n, ms * nc, ms * nc)
         Ke = X @ self.R + self.R.T @ X.transpose(0, 2, 1) + self.R.T @ inner @ self.R
         K = np.zeros((self.n_dof, self.n_dof))
         for e in range(n):

@@ -12,7 +12,8 @@ import time
 from fxflex.io.machine import machine
 from fxflex.scene import Scene
 
-__all__ = ["machine", "scene_overrides", "child_env", "run_cli", "markdown_table", "Timer"]
+__all__ = ["machine", "scene_overrides", "child_env", "run_cli", "markdown_table", "Timer",
+           "median_time", "REPEAT_BUDGET_S", "MAX_REPEATS"]
 
 
 def scene_overrides(scene: Scene) -> list[str]:
@@ -74,3 +75,36 @@ class Timer:
 
     def __exit__(self, *exc):
         self.s = time.perf_counter() - self.t0
+
+
+#: :func:`median_time` repeats a call while its runs so far took less than this many seconds
+REPEAT_BUDGET_S = 0.5
+#: ... and at most this many times
+MAX_REPEATS = 31
+
+
+def median_time(fn, comm=None, budget: float = REPEAT_BUDGET_S, most: int = MAX_REPEATS
+                ) -> tuple[object, float, int]:
+    """(first result, median seconds, runs) of ``fn()``, run again while the runs so far took
+    less than ``budget`` seconds in all (at most ``most`` runs). A millisecond route timed once
+    varies by tens of per cent with the garbage collector and the caches' state (a beam
+    ``--tol`` ladder: 3.1x one time, 2.7x the next against the same table route); a route of
+    seconds runs once. ``comm``: the ranks agree on the count (the slowest rank's time), for a
+    collective ``fn``."""
+    times, out = [], None
+    while True:
+        t0 = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t0)
+        if out is None:
+            out = (result,)
+        spent = sum(times)
+        if comm is not None and comm.size > 1:
+            from mpi4py import MPI
+            spent = comm.allreduce(spent, op=MPI.MAX)
+        if spent >= budget or len(times) >= most:
+            break
+    times.sort()
+    mid = len(times) // 2
+    median = times[mid] if len(times) % 2 else 0.5 * (times[mid - 1] + times[mid])
+    return out[0], median, len(times)

@@ -5,7 +5,9 @@ For each method, EPS in :data:`EPSILONS` and speed in :data:`SPEEDS` the steady 
 that its cost is that of a first command) and, at :data:`MODE_SPEEDS`, ``modes --tol`` for the
 lowest :data:`PAIRS` frequencies. Each row records the discretisation reached, the estimate, the
 TRUE error against the method's own converged reference, the ratio true / estimate (issue 15: at
-most 3) and the wall time.
+most 3) and the wall time (:func:`fxflex.bench.common.median_time`: the median of repeated runs
+within half a second, so that a route of milliseconds is not one noisy sample; a route of
+seconds runs once).
 
 References (the method's own continuum, as the estimate is):
 
@@ -30,7 +32,8 @@ largest true error to the largest estimate.
 Cost target (issue 15: ``--tol 1e-3`` within 3x of the cheapest discretisation of ``fxflex bench
 accuracy`` that meets it): the discretisations of the accuracy tables (:data:`CANDIDATES`: the
 steady routes of ``fxflex/bench/accuracy.py`` and the levels of ``fxflex bench convergence``)
-are solved with the caches bypassed (build + solve, as both benches do), against the same
+are solved with the caches bypassed (build + solve, as both benches do; timed as the rows
+are, by :func:`~fxflex.bench.common.median_time`), against the same
 reference, cheapest first per family until one meets the smallest EPS; the cheapest meeting each
 EPS is the baseline. Levels above :data:`~fxflex.analysis.tolerance.MAX_DOF` unknowns are not
 tried (Q1 192x24x12; noted in the report).
@@ -45,7 +48,6 @@ from __future__ import annotations
 import json
 import os
 import sys
-import time
 
 import numpy as np
 
@@ -53,7 +55,7 @@ from fxflex import cache
 from fxflex.analysis import reference as refmod
 from fxflex.analysis.tolerance import (BEAM_START, MAX_DOF, ToleranceNotMet,
                                        modes_to_tolerance, shown, steady_to_tolerance)
-from fxflex.bench.common import machine, markdown_table
+from fxflex.bench.common import machine, markdown_table, median_time
 from fxflex.errors import FxflexError
 from fxflex.io.payload import jsonable
 from fxflex.scene import Scene, scene_from_dict
@@ -178,22 +180,20 @@ def _warm_up(method: str, scene: Scene, comm, what: str) -> None:
 
 def _tol_row(method: str, scene: Scene, comm, eps: float, what: str) -> dict:
     _warm_up(method, scene, comm, what)
-    t0 = time.perf_counter()
-    met = True
-    with cache.bypass():
+
+    def route():
         try:
             if what == "steady":
-                out = steady_to_tolerance(method, scene, comm, eps)
-            else:
-                out = modes_to_tolerance(method, scene, comm, eps, PAIRS)
+                return steady_to_tolerance(method, scene, comm, eps), None
+            return modes_to_tolerance(method, scene, comm, eps, PAIRS), None
         except ToleranceNotMet as exc:
-            out, met = exc.result, False
-            note = str(exc)
-        else:
-            note = None
-    wall = time.perf_counter() - t0
-    return {"method": method, "what": what, "rpm": scene.rotation.rpm, "eps": eps, "met": met,
-            "note": note, "wall_s": wall, "result": list(out["best"]["result"]),
+            return exc.result, str(exc)
+
+    with cache.bypass():
+        (out, note), wall, runs = median_time(route, comm)
+    return {"method": method, "what": what, "rpm": scene.rotation.rpm, "eps": eps,
+            "met": note is None, "note": note, "wall_s": wall, "timing_runs": runs,
+            "result": list(out["best"]["result"]),
             "estimate": out["estimate"], "how": out["how"], "reached": shown(out["discretisation"]),
             "discretisation": {k: v for k, v in out["discretisation"].items() if k != "levels"},
             "dof": out["best"]["dof"], "levels": out["levels"],
@@ -267,14 +267,16 @@ def candidates(method: str, scene: Scene, comm, ref_value, eps_min: float, log,
                 rows.append({"family": family, "label": label,
                              "skipped": f"above {max_dof} unknowns"})
                 continue
-            t0 = time.perf_counter()
-            with cache.bypass():
+            def route():
                 form = build(method, sc, comm)
-                st = form.steady_state()
-            cost = time.perf_counter() - t0
+                return form, form.steady_state()
+
+            with cache.bypass():
+                (form, st), cost, runs = median_time(route, comm)
             true = true_errors(st.tip, ref_value, "steady")
             rows.append({"family": family, "label": label, "dof": form.dof, "cost_s": cost,
-                         "converged": bool(st.converged), "error": float(np.max(true))})
+                         "timing_runs": runs, "converged": bool(st.converged),
+                         "error": float(np.max(true))})
             log(f"  candidate {method} {label}: error {np.max(true):.2e}, {cost:.2f} s")
             if st.converged and np.max(true) < eps_min:
                 bound = min(bound, cost)

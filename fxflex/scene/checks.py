@@ -256,39 +256,46 @@ def check_scene(scene) -> None:
         if not isinstance(getattr(scene, name), cls):
             raise SceneError(name, f"expected a {cls.__name__}, got "
                                    f"{shown(getattr(scene, name))}")
-    g, mat = scene.geometry, scene.material
+    _check_strains(scene.geometry, scene.material, scene.rotation, scene.load, scene.tip_mass)
+
+
+@functools.lru_cache(maxsize=64)
+def _check_strains(g, mat, rotation, load, tip_mass) -> None:
+    """:func:`check_scene`'s strain bounds: a function of these frozen sections alone, kept for
+    the ones already checked (a scene that changes only its mesh, as every ``--tol`` level does,
+    is not checked again: two thirds of making such a scene; errors are not kept)."""
     # centrifugal stress at the root of a uniform bar: rho Omega^2 ((R+L)^2 - R^2) / 2, written
     # as L (2R + L) so that no square of a large radius is formed
     R, L = g.hub_radius, g.length
     arm2 = L * (2.0 * R + L)
-    omega = scene.rotation.omega
+    omega = rotation.omega
     strain = mat.rho * omega * omega * arm2 / (2.0 * mat.E)
     if not strain < 1.0:
         limit = math.sqrt(2.0 * mat.E / mat.rho) / math.sqrt(arm2) * 60 / (2 * math.pi)
-        raise SceneError("rotation.rpm", f"{scene.rotation.rpm!r} rpm strains the beam by "
+        raise SceneError("rotation.rpm", f"{rotation.rpm!r} rpm strains the beam by "
                                          f"{strain:.3g} (centrifugal stress / E >= 1 with "
                                          f"material.E = {mat.E!r}, rho = {mat.rho!r}): "
                                          f"meaningless for an elastic body; allowed: below "
                                          f"{limit:.4g} rpm for this scene")
     # the tip mass's centrifugal force m Omega^2 (R + L) on the tip section (its area at most
     # tip_y tip_z: a lower bound of the stress)
-    pull = scene.tip_mass.mass * omega * omega * (R + L)
+    pull = tip_mass.mass * omega * omega * (R + L)
     strain = pull / (g.tip_y * g.tip_z * mat.E)
     if not strain < 1.0:
-        raise SceneError("tip_mass.mass", f"{scene.tip_mass.mass!r} kg at {scene.rotation.rpm!r} "
+        raise SceneError("tip_mass.mass", f"{tip_mass.mass!r} kg at {rotation.rpm!r} "
                                           f"rpm pulls the tip section by {strain:.3g} times "
                                           f"material.E ({pull:.3g} N): meaningless for an "
                                           f"elastic body; allowed: below "
-                                          f"{scene.tip_mass.mass / strain:.4g} kg at this speed")
+                                          f"{tip_mass.mass / strain:.4g} kg at this speed")
     # bending at each station under the line load and the tip force, on the stiffer axis of the
     # section (a lower bound of the stress)
     x = np.linspace(0.0, L, 101)
     s = x / L
     b, h = g.root_y + (g.tip_y - g.root_y) * s, g.root_z + (g.tip_z - g.root_z) * s
     W = np.maximum(b * h * h, h * b * b) / 6.0
-    Fx, Fy, Fz = scene.load.tip_force
+    Fx, Fy, Fz = load.tip_force
     with np.errstate(over="ignore"):
-        by_line = abs(scene.load.line_load) * (L - x) ** 2 / 2.0 / W / mat.E
+        by_line = abs(load.line_load) * (L - x) ** 2 / 2.0 / W / mat.E
         by_tip = (math.hypot(Fy, Fz) * (L - x) / W + abs(Fx) / (b * h)) / mat.E
         strain = float(np.max(by_line + by_tip))
     if not strain < 1.0:
