@@ -8,7 +8,10 @@ between theories is what ``fxflex compare`` is for.
 Refinement ladder per method (:func:`ladder`), cheap first, only through existing scene keys:
 
 - LEBB: ``mesh.beam_elements`` 2, 4, then the counts the convergence asks for (uniform
-  Euler-Bernoulli beam; converges as h^2, docs/convergence_measured.md);
+  Euler-Bernoulli beam; converges as h^2, docs/convergence_measured.md). Its Hermite spaces
+  nest, so the 2-element level is solved on the 4-element level's operators restricted to its
+  subspace (:meth:`Refiner.nested`; the same discretisation to 1e-13 of |tip|): a build
+  fewer, most of a LEBB level's cost;
 - NEBB, ANCF: ``mesh.beam_variant = "locking-free"`` (unless the scene sets another variant than
   the default "paper" -- a scene that names "paper" explicitly is the default and is refined
   locking-free too), elements 2, 4, then as LEBB (ANCF from 2, not 5, since 2026-12-06: its
@@ -287,6 +290,23 @@ class Refiner:
         if U0 is not None:
             form.steady_start = (form.scene.rotation.omega, U0)
 
+    def nested(self, scene: Scene, finer: Scene) -> Scene:
+        """LEBB steady: the level of ``finer`` (a mesh that refines ``scene``'s), built and
+        solved, and the level of ``scene`` from it by restriction to the coarse Hermite
+        subspace (:meth:`~fxflex.beam.frame.FloatingFrameBeam.restricted_steady`: the same
+        discretisation, to 1e-13 of |tip|, without a build of its own, which is most of a LEBB
+        level's cost); both kept for :meth:`level`. Returns ``finer``."""
+        if ("steady", scene) in self.done:
+            return finer
+        fine = self.level(finer, "steady")
+        t0 = time.perf_counter()
+        st = fine["form"].restricted_steady(scene.mesh.beam_elements)
+        self.done[("steady", scene)] = {
+            "discretisation": describe(scene, self.method), "dof": st.q.size,
+            "result": [float(x) for x in st.tip], "seconds": time.perf_counter() - t0,
+            "build_s": 0.0, "form": None, "steady": st}
+        return finer
+
     def truncated(self, scene: Scene, what: str, source: dict) -> dict:
         """The level of ``scene`` whose mode count is below that of ``source`` (a level of the
         same mesh, FFRF / GCMS): built on the source's mesh, operators and clamped modes, of
@@ -351,19 +371,25 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
         hs, rows, levels, err, how = [], [], [], None, []
         mode_err = 0.0
         capped, restart, stopped = "the ladder's last level", False, False
-        pending, used = list(steps), 0
+        pending, used, made = list(steps), 0, None
         while pending and used < cap:
             h, overrides = pending.pop(0)
             used += 1
             if key:
                 overrides = {**overrides, "reduction": {key: 2 * count}}
-            level_scene = scene_from_dict(overrides, base=scene)
+            level_scene = made or scene_from_dict(overrides, base=scene)
+            made = None
             if _mesh_unknowns(method, level_scene) > max_dof and len(rows) >= 2:
                 capped = f"the cap of {max_dof} unknowns"
                 stopped = True
                 break
             if not rows and _refused(method, level_scene, log):
                 continue                      # too coarse for the scene: the next mesh
+            if (not rows and method == "lebb" and what == "steady" and pending and used < cap
+                    and pending[0][1]["mesh"]["beam_elements"]
+                    % level_scene.mesh.beam_elements == 0):
+                # LEBB's first level from its second by restriction (nested Hermite spaces)
+                made = refiner.nested(level_scene, scene_from_dict(pending[0][1], base=scene))
             row = refiner.level(level_scene, what)
             if rows and len(row["result"]) != len(rows[-1][0]["result"]):
                 raise FxflexError(f"--tol: the {method} levels give different numbers of modes")

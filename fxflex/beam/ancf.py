@@ -145,8 +145,10 @@ class ANCF(FormulationBase):
             BL, W = centerline_strain(self.e0n, tab, X, Y, Z, le)
             self.KLe, T1, T4 = gram_tensors(C, BL, W, dV)
         emap = np.arange(2 * DPN).reshape(2 * SLOTS, 3)
+        # the system matrices serve the time loop's invariant route only: built at its
+        # initial_state (a steady state or modes analysis never needs them: a third of a build)
         self.engine = GramChain(T1, T4, dpn=DPN, spn=SLOTS, emap=emap, esign=np.ones(emap.shape),
-                                system=self.force_eval == "invariant")
+                                system=False)
         # linear stiffness and scalar mass (Eq. 54: M = Ms x I_3), assembled
         KL = assemble_blocks(self.KLe, DPN, self.n_full)
         Ms = assemble_blocks(scalar_mass(rho, dV, tab.N), SLOTS, self.n_slots)
@@ -209,7 +211,10 @@ class ANCF(FormulationBase):
         return A
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """Undeformed beam in rigid rotation (NOTES.md): e = A(phi0) e0, e' = phi'(0) S e."""
+        """Undeformed beam in rigid rotation (NOTES.md): e = A(phi0) e0, e' = phi'(0) S e. A time
+        loop follows: the invariant route's system matrices are built here, before its clock."""
+        if self.force_eval == "invariant":
+            self.engine.prepare_system()
         phi, rate, _ = self.drive.state(0.0)
         self._rotate(phi)
         q = self._Ae0.reshape(-1).copy()
@@ -236,9 +241,18 @@ class ANCF(FormulationBase):
             self.engine.add_force_element(u, out)
 
     def elastic_force(self, e: np.ndarray) -> np.ndarray:
-        """Q_k at coordinates e (allocating; checks and Newton)."""
+        """Q_k at coordinates e by the ``force_eval`` route (allocating; checks)."""
         out = np.zeros(self.n_full)
         self.add_elastic_force(np.ascontiguousarray(e - self.e0), out)
+        return out
+
+    def static_force(self, e: np.ndarray) -> np.ndarray:
+        """Q_k at coordinates e by the element invariant route (the same force to round-off,
+        no system matrices): the steady Newton's residual."""
+        out = np.zeros(self.n_full)
+        u = np.ascontiguousarray(e - self.e0)
+        self.KL_add.add(u, out)
+        self.engine.add_force_element(u, out)
         return out
 
     def acceleration(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
@@ -408,7 +422,7 @@ class ANCF(FormulationBase):
         e = self._full(x)
         rate = math.sqrt(s) * self.scene.rotation.omega
         e3 = e.reshape(-1, 3)
-        r = self.elastic_force(e)
+        r = self.static_force(e)
         r -= rate**2 * (self.Ms @ (e3 @ P3.T)).reshape(-1)
         if self.absolute:
             r += self.c_rho * rate * (self.Ms @ ((e3 - self.e0n.reshape(-1, 3)) @ S3.T)).reshape(-1)

@@ -110,6 +110,12 @@ class GramChain:
         self._alloc_element()
 
     # ------------------------------------------------------------------ system invariant route
+    def prepare_system(self) -> None:
+        """Build the system invariant matrices now if not yet built (before a time loop's clock;
+        a steady state or modes analysis uses the element route and never needs them)."""
+        if self.K1h is None:
+            self._build_system()
+
     def _build_system(self) -> None:
         ms, spn, dpn = self.ms, self.spn, self.dpn
         n_nodes = self.n_el + 1

@@ -98,8 +98,8 @@ class NEBB(FloatingFrameBeam):
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
         """As the frame's; a time loop follows, so the invariant route's system matrices are
         built here, before its clock starts (a steady state or modes never needs them)."""
-        if self.force_eval == "invariant" and self.engine.K1h is None:
-            self.engine._build_system()
+        if self.force_eval == "invariant":
+            self.engine.prepare_system()
         return super().initial_state()
 
     def add_static_force(self, Wfull: np.ndarray, out: np.ndarray) -> None:

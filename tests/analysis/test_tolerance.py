@@ -495,3 +495,35 @@ def test_a_refiner_reused_at_another_eps_solves_its_levels_again():
     steady_to_tolerance("nebb", scene, MPI.COMM_WORLD, 1e-3, refiner=refiner)
     rtols = {row["form"].steady_rtol for row in refiner.done.values()}
     assert len(rtols) == 1 and rtols.pop() == pytest.approx(NEWTON_EPS * 1e-3)
+
+
+def test_lebb_first_level_is_restricted_from_the_second():
+    """LEBB's Hermite spaces nest, so its ladder's first level (2 elements) is the Galerkin
+    solution on that subspace of the second (4 elements): P^T A P u = P^T f with P the coarse
+    space's prolongation (FloatingFrameBeam.restricted_steady). It is the 2-element
+    discretisation: the tip equals a 2-element build's to 1e-11 of |tip| (measured 2e-14 to
+    8e-14; the two differ only in where the section properties are sampled, 6 Gauss points per
+    element of either mesh, exact for the taper's polynomials and to about 1e-13 for the
+    twist), and it costs no build of its own. A nonlinear beam, or a mesh that does not refine
+    the coarse one, is refused."""
+    from fxflex.analysis.tolerance import Refiner, steady_to_tolerance
+
+    for rpm in (1000.0, 10000.0):
+        scene = scene_from_dict({"rotation": {"rpm": rpm}, "damping": {"model": "absolute",
+                                                                       "c": 3e5}}, base=Scene())
+        refiner = Refiner("lebb", MPI.COMM_WORLD)
+        out = steady_to_tolerance("lebb", scene, MPI.COMM_WORLD, 1e-3, refiner=refiner)
+        first = out["levels"][0]
+        assert first["discretisation"]["elements"] == 2 and first["dof"] == 12
+        row = next(r for (what, sc), r in refiner.done.items() if sc.mesh.beam_elements == 2)
+        assert row["form"] is None and row["build_s"] == 0.0
+        two = build("lebb", scene_from_dict({"mesh": {"beam_elements": 2}}, base=scene),
+                    MPI.COMM_WORLD).steady_state()
+        assert (np.abs(np.asarray(first["tip_m"]) - two.tip).max()
+                < 1e-11 * np.linalg.norm(two.tip))
+    four = build("lebb", scene_from_dict({"mesh": {"beam_elements": 4}}), MPI.COMM_WORLD)
+    with pytest.raises(ValueError, match="refining"):
+        four.restricted_steady(3)
+    nebb = build("nebb", scene_from_dict({"mesh": {"beam_elements": 4}}), MPI.COMM_WORLD)
+    with pytest.raises(ValueError, match="linear"):
+        nebb.restricted_steady(2)
