@@ -77,3 +77,25 @@ def test_element_route_builds_no_system_matrices(method):
     assert np.abs(a - b).max() <= 1e-9 * np.abs(b).max()
     assert element.engine.K1h is None                # the time loop never builds them
     assert invariant.engine.K1h is not None          # its time loop does
+
+
+@pytest.mark.parametrize("method", ["lebb", "nebb"])
+def test_frame_beams_make_the_inverse_mass_products_only_for_a_time_loop(method):
+    """A steady state and its linearisation never need M^-1 and its products: not made at build
+    nor by them; initial_state (before a time loop's clock) makes them, and a loop that starts
+    without it (a resumed run) gets them on first use, the same matrices."""
+    scene = load_scene(overrides=["mesh.beam_elements=4"])
+    form = build(method, scene, MPI.COMM_SELF)
+    form.steady_state()
+    form.linearise()
+    assert "Minv" not in vars(form) and "MiK" not in vars(form)
+    form.initial_state()
+    assert "Minv" in vars(form)
+    other = build(method, scene, MPI.COMM_SELF)
+    assert np.array_equal(other.MiK, form.MiK)                 # on first use
+    a, b = np.zeros(form.dof), np.zeros(form.dof)
+    q = 1e-4 * np.random.default_rng(1).standard_normal(form.dof)
+    fresh = build(method, scene, MPI.COMM_SELF)
+    form.acceleration(1e-4, q, q, a)
+    fresh.acceleration(1e-4, q, q, b)                          # no initial_state
+    assert np.array_equal(a, b)

@@ -9,8 +9,9 @@ Refinement ladder per method (:func:`ladder`), cheap first, only through existin
 
 - LEBB: ``mesh.beam_elements`` 2, 4, then the counts the convergence asks for (uniform
   Euler-Bernoulli beam; converges as h^2, docs/convergence_measured.md). Its Hermite spaces
-  nest, so the 2-element level is solved on the 4-element level's operators restricted to its
-  subspace (:meth:`Refiner.nested`; the same discretisation to 1e-13 of |tip|): a build
+  nest, so on the paper's shape the 2-element level is solved on the 4-element level's
+  operators restricted to its subspace (:meth:`Refiner.nested`; the same discretisation to
+  1e-13 of |tip|; station tables and hollow walls would differ by their quadrature): a build
   fewer, most of a LEBB level's cost;
 - NEBB, ANCF: ``mesh.beam_variant = "locking-free"`` (unless the scene sets another variant than
   the default "paper" -- a scene that names "paper" explicitly is the default and is refined
@@ -293,9 +294,10 @@ class Refiner:
     def nested(self, scene: Scene, finer: Scene) -> Scene:
         """LEBB steady: the level of ``finer`` (a mesh that refines ``scene``'s), built and
         solved, and the level of ``scene`` from it by restriction to the coarse Hermite
-        subspace (:meth:`~fxflex.beam.frame.FloatingFrameBeam.restricted_steady`: the same
-        discretisation, to 1e-13 of |tip|, without a build of its own, which is most of a LEBB
-        level's cost); both kept for :meth:`level`. Returns ``finer``."""
+        subspace (:meth:`~fxflex.beam.frame.FloatingFrameBeam.restricted_steady`: on the
+        paper's shape the same discretisation, to 1e-13 of |tip|, without a build of its own,
+        which is most of a LEBB level's cost); both kept for :meth:`level`. Returns
+        ``finer``."""
         if ("steady", scene) in self.done:
             return finer
         fine = self.level(finer, "steady")
@@ -386,9 +388,10 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
             if not rows and _refused(method, level_scene, log):
                 continue                      # too coarse for the scene: the next mesh
             if (not rows and method == "lebb" and what == "steady" and pending and used < cap
-                    and pending[0][1]["mesh"]["beam_elements"]
+                    and scene.geometry.paper_shape and pending[0][1]["mesh"]["beam_elements"]
                     % level_scene.mesh.beam_elements == 0):
-                # LEBB's first level from its second by restriction (nested Hermite spaces)
+                # LEBB's first level from its second by restriction (nested Hermite spaces;
+                # the paper's shape, whose section properties the two meshes integrate alike)
                 made = refiner.nested(level_scene, scene_from_dict(pending[0][1], base=scene))
             row = refiner.level(level_scene, what)
             if rows and len(row["result"]) != len(rows[-1][0]["result"]):

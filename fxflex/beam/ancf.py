@@ -248,7 +248,7 @@ class ANCF(FormulationBase):
 
     def static_force(self, e: np.ndarray) -> np.ndarray:
         """Q_k at coordinates e by the element invariant route (the same force to round-off,
-        no system matrices): the steady Newton's residual."""
+        no system matrices): the steady Newton's residual and the root stress."""
         out = np.zeros(self.n_full)
         u = np.ascontiguousarray(e - self.e0)
         self.KL_add.add(u, out)
@@ -401,7 +401,7 @@ class ANCF(FormulationBase):
         M = sum_s r_s x Q_s over the gradient slots (a rigid rotation d theta moves each gradient
         by d theta x r_s); then N = -F_X, int Y sigma dA = M_Z, int Z sigma dA = -M_Y, spread
         linearly over the section as in beam theory."""
-        Q = self.elastic_force(q)
+        Q = self.static_force(q)
         Q -= self.scene.load.factor(t) * self.fq
         A = self.drive.A(t)
         Qr = Q[:DPN].reshape(SLOTS, 3) @ A               # rows (A^T Q_s)^T

@@ -210,19 +210,26 @@ def element_integral(dx: np.ndarray, N1: np.ndarray, A: np.ndarray, N2: np.ndarr
     return (np.swapaxes(N1, -1, -2) @ T).sum(axis=1)
 
 
+def _prolongation_parts(n_el: int, le: float, x_nodes: np.ndarray):
+    """(e, N): per node of ``x_nodes`` after the root, the element of a beam of ``n_el`` elements
+    of length ``le`` it lies in and the element's shape matrix N_E (Eq. 37) there (n, 6, 12)."""
+    x = np.asarray(x_nodes, float)[1:]
+    e = np.minimum((x / le).astype(int), n_el - 1)
+    return e, lebb_tables(x / le - e, le).N
+
+
 def prolongation(n_el: int, le: float, x_nodes: np.ndarray) -> np.ndarray:
     """(6 (len(x_nodes) - 1), 6 n_el): the coordinates of a beam of ``n_el`` elements of length
     ``le`` (root clamped) interpolated at the nodes ``x_nodes`` of another mesh of the same line
     (root first, left out): the element's shape matrix N_E (Eq. 37) at each node gives its six
     coordinates (values and rotations). Exact for every field of the coarse space at nodes of a
-    mesh that refines it (nested Hermite spaces)."""
-    x = np.asarray(x_nodes, float)[1:]
-    e = np.minimum((x / le).astype(int), n_el - 1)
-    N = lebb_tables(x / le - e, le).N                          # (n, 6, 12)
-    P = np.zeros((x.size, 6, 6 * (n_el + 1)))
-    rows = np.arange(x.size)[:, None, None]
+    mesh that refines it (nested Hermite spaces). As a dense matrix (the restricted solve);
+    :meth:`FloatingFrameBeam.prolongate` applies it to a vector without forming it."""
+    e, N = _prolongation_parts(n_el, le, x_nodes)
+    P = np.zeros((e.size, 6, 6 * (n_el + 1)))
+    rows = np.arange(e.size)[:, None, None]
     P[rows, np.arange(6)[None, :, None], (6 * e[:, None] + np.arange(12))[:, None, :]] = N
-    return P.reshape(6 * x.size, -1)[:, 6:]                    # the clamped root's columns out
+    return P.reshape(6 * e.size, -1)[:, 6:]                    # the clamped root's columns out
 
 
 class FloatingFrameBeam(FormulationBase):
@@ -318,8 +325,8 @@ class FloatingFrameBeam(FormulationBase):
                            "Mi_g", "Mi_n"})
 
     def __getattr__(self, name: str):
-        """The M^-1 products on first use (a steady state, modes or an implicit run never
-        needs them: a tenth to a fifth of a small build)."""
+        """The M^-1 products on first use (a steady state or modes analysis never needs them:
+        a tenth to a fifth of a small build; a time loop makes them at :meth:`initial_state`)."""
         if name in type(self)._EXPLICIT and "M" in self.__dict__:
             self._explicit_matrices()
             return self.__dict__[name]
@@ -588,20 +595,29 @@ class FloatingFrameBeam(FormulationBase):
     steady_start: np.ndarray | None = None
 
     def prolongate(self, W: np.ndarray, x_nodes: np.ndarray) -> np.ndarray:
-        """This beam's coordinates W (root clamped; a vector, or one per column) interpolated at
-        the nodes ``x_nodes`` of another mesh of the same line (:func:`prolongation`)."""
-        return prolongation(self.line.n_el, self.line.le, x_nodes) @ W
+        """This beam's coordinates W (root clamped) interpolated at the nodes ``x_nodes`` of
+        another mesh of the same line (:func:`prolongation`, applied node by node)."""
+        e, N = _prolongation_parts(self.line.n_el, self.line.le, x_nodes)
+        ends = np.concatenate([np.zeros(6), W])[6 * e[:, None] + np.arange(12)]   # (n, 12)
+        return np.einsum("nij,nj->ni", N, ends).reshape(-1)
 
     def restricted_steady(self, n_coarse: int) -> SteadyState:
         """LEBB: the steady state on ``n_coarse`` equal elements, whose Hermite space is a
         subspace of this mesh's when this mesh refines it (n_el a multiple of n_coarse): the
-        Galerkin solution there, P^T (K_L - Omega^2 N) P u = P^T (Q_e + Omega^2 n) with P the
-        coarse space's :func:`prolongation` to these nodes. It is the ``n_coarse``-element
-        discretisation; only its quadrature (this mesh's Gauss points, more of them) differs:
-        the tip agrees with a ``n_coarse``-element build to 1e-13 of |tip|. Costs no build (the
-        ``--tol`` ladder's first level, :meth:`fxflex.analysis.tolerance.Refiner.nested`)."""
-        if self.nonlinear or self.line.n_el % n_coarse:
-            raise ValueError("restricted_steady: a linear beam (LEBB) refining n_coarse elements")
+        Galerkin solution there, P^T (K_L - Omega^2 N [+ c/rho Omega G, absolute damping]) P u
+        = P^T (Q_e + Omega^2 n) with P the coarse space's :func:`prolongation` to these nodes.
+        It is the ``n_coarse``-element discretisation integrated at this mesh's Gauss points:
+        where the section properties are polynomial or smooth along the span (the paper's
+        rectangle, tapered and twisted) the tip agrees with a ``n_coarse``-element build to
+        1e-13 of |tip|; station tables and hollow walls, sampled more densely here, differ by
+        their quadrature (2.9e-5 for a tapered hollow wall), which is why the ladder uses it
+        only for the paper's shape. Costs no build (the ``--tol`` ladder's first level,
+        :meth:`fxflex.analysis.tolerance.Refiner.nested`)."""
+        if self.nonlinear:
+            raise ValueError("restricted_steady: only a linear beam (LEBB)")
+        if self.line.n_el % n_coarse:
+            raise ValueError(f"restricted_steady: {self.line.n_el} elements do not refine "
+                             f"{n_coarse}")
         t0 = time.perf_counter()
         P = prolongation(n_coarse, self.line.length / n_coarse, self.line.x_nodes)
         zero = np.zeros(self.dof)

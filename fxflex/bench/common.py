@@ -89,8 +89,8 @@ def median_time(fn, comm=None, budget: float = REPEAT_BUDGET_S, most: int = MAX_
     less than ``budget`` seconds in all (at most ``most`` runs). A millisecond route timed once
     varies by tens of per cent with the garbage collector and the caches' state (a beam
     ``--tol`` ladder: 3.1x one time, 2.7x the next against the same table route); a route of
-    seconds runs once. ``comm``: the ranks agree on the count (the slowest rank's time), for a
-    collective ``fn``."""
+    seconds runs once. ``comm``: the ranks agree on the count (each stops when the slowest
+    rank's total reaches the budget), for a collective ``fn``; the median is this rank's."""
     times, out = [], None
     while True:
         t0 = time.perf_counter()

@@ -504,8 +504,9 @@ def test_lebb_first_level_is_restricted_from_the_second():
     discretisation: the tip equals a 2-element build's to 1e-11 of |tip| (measured 2e-14 to
     8e-14; the two differ only in where the section properties are sampled, 6 Gauss points per
     element of either mesh, exact for the taper's polynomials and to about 1e-13 for the
-    twist), and it costs no build of its own. A nonlinear beam, or a mesh that does not refine
-    the coarse one, is refused."""
+    twist), and it costs no build of its own. A hollow wall (properties that the two meshes
+    integrate differently) keeps its own build. A nonlinear beam, or a mesh that does not
+    refine the coarse one, is refused."""
     from fxflex.analysis.tolerance import Refiner, steady_to_tolerance
 
     for rpm in (1000.0, 10000.0):
@@ -521,9 +522,13 @@ def test_lebb_first_level_is_restricted_from_the_second():
                     MPI.COMM_WORLD).steady_state()
         assert (np.abs(np.asarray(first["tip_m"]) - two.tip).max()
                 < 1e-11 * np.linalg.norm(two.tip))
+    hollow = scene_from_dict({"geometry": {"wall": 0.005}}, base=Scene())
+    refiner = Refiner("lebb", MPI.COMM_WORLD)
+    steady_to_tolerance("lebb", hollow, MPI.COMM_WORLD, 1e-3, refiner=refiner)
+    assert all(row["form"] is not None for row in refiner.done.values())   # built, not restricted
     four = build("lebb", scene_from_dict({"mesh": {"beam_elements": 4}}), MPI.COMM_WORLD)
-    with pytest.raises(ValueError, match="refining"):
+    with pytest.raises(ValueError, match="do not refine"):
         four.restricted_steady(3)
     nebb = build("nebb", scene_from_dict({"mesh": {"beam_elements": 4}}), MPI.COMM_WORLD)
-    with pytest.raises(ValueError, match="linear"):
+    with pytest.raises(ValueError, match="only a linear"):
         nebb.restricted_steady(2)
