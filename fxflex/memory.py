@@ -63,7 +63,7 @@ SOLIDS = ("ffrf", "gcms", "tlf")
 #: Beams: the interpreter with numpy and scipy, per unknown (quadrature and element tables, the
 #: invariant engines of ANCF) and per unknown squared (dense matrices: 18 doubles for LEBB and
 #: NEBB, 44 for ANCF, whose tangent and companion matrices carry all 21 slot coordinates).
-BEAM = {"lebb": (65e6, 50e3, 145.0), "nebb": (65e6, 50e3, 145.0), "ancf": (70e6, 195e3, 350.0)}
+BEAM = {"lebb": (65e6, 50e3, 145.0), "nebb": (65e6, 50e3, 145.0), "ancf": (85e6, 195e3, 350.0)}
 #: Solids: the interpreter with dolfinx, PETSc and SLEPc (per rank); per unknown (mesh, dof maps,
 #: sparse K, M or Jacobian, work vectors); per unknown and clamped mode (FFRF, GCMS: the
 #: eigenvectors, SLEPc's basis of about twice as many, the gathered copy); per unknown^(4/3)

@@ -44,9 +44,11 @@ along the span): with three levels whose differences have one sign and shrink, a
 order p (:func:`fxflex.analysis.reference.richardson`) lies in [MIN_ORDER, MAX_ORDER], the
 estimate is |f_3 - f_Richardson| ("richardson"; for the solids' frequencies with the order
 capped at :data:`SOLID_MODES_ORDER`); otherwise the difference of the last two levels
-|f_3 - f_2| ("difference"), which for a tip component is at least the largest component's
-estimate ("difference, the largest": a small component's own difference says nothing of its
-order). Steady: each tip component relative to |tip| of the finest level;
+|f_3 - f_2| ("difference"); a tip component's reported "difference" is at least the largest
+component's estimate ("difference, the largest", :func:`share_largest`: a small component's
+own difference says nothing of its order). The ladder's tests (stop, mode-count restart, the
+next beam count) use the components' own estimates; sharing leaves the largest, and so a test
+of every estimate against EPS, unchanged. Steady: each tip component relative to |tip| of the finest level;
 modes: each frequency relative to itself. The result returned is the finest level's (a real
 discretisation, not the extrapolation).
 
@@ -74,6 +76,7 @@ from fxflex.errors import FxflexError
 from fxflex.scene import Scene, scene_from_dict
 
 __all__ = ["COMPONENTS", "SOLID_LADDER", "MAX_DOF", "ToleranceNotMet", "ladder", "estimate",
+           "share_largest",
            "Refiner", "steady_to_tolerance", "modes_to_tolerance", "json_fields", "shown",
            "DISCRETISATION_KEYS", "fixing_keys", "describe"]
 
@@ -195,13 +198,9 @@ def estimate(h, values, scale, order_cap: float | None = None, shared: bool = Fa
     last level relative to ``scale`` (a number or one per quantity), and how ("richardson",
     "richardson, order P taken as CAP" or "difference"; module docstring). ``order_cap``: an
     observed order above it is taken as the cap, |f_3 - f_2| / ((h_2 / h_3)^cap - 1) (a
-    pre-asymptotic order would shrink the estimate). ``shared`` (quantities on one scale: the
-    tip components relative to |tip|): a "difference" below the largest estimate is raised to
-    it, "difference, the largest": a quantity's own difference bounds its error only if it
-    converges at first order or faster, which nothing checks with two levels (TLF's orthogonal
-    tip component, 200 times below the others, has an observed order of 0.35 on Q2 8x2x2 ->
-    16x2x2, and its difference was 3.6x below its error); the largest estimate, which the
-    ladder stops on, does not change. Needs two levels or more."""
+    pre-asymptotic order would shrink the estimate). ``shared``: :func:`share_largest` (TLF's
+    orthogonal tip component, 200 times below the others, has an observed order of 0.35 on Q2
+    8x2x2 -> 16x2x2, and its difference was 3.6x below its error). Needs two levels or more."""
     h = np.asarray(h, float)
     f = np.asarray(values, float)
     if f.ndim == 1:
@@ -224,11 +223,20 @@ def estimate(h, values, scale, order_cap: float | None = None, shared: bool = Fa
                     e = abs(d23) / ((h[-2] / h[-1]) ** order_cap - 1.0)
         err[k] = e / scale[k] if scale[k] > 0 else (0.0 if e == 0 else np.inf)
         how.append(kind)
-    if shared:
-        top = float(np.max(err))
-        for k, kind in enumerate(how):
-            if kind == "difference" and err[k] < top:
-                err[k], how[k] = top, "difference, the largest"
+    return share_largest(err, how) if shared else (err, how)
+
+
+def share_largest(err: np.ndarray, how: list[str]) -> tuple[np.ndarray, list[str]]:
+    """Quantities on one scale (the tip components relative to |tip|): an estimate of kind
+    "difference" below the largest is raised to it, "difference, the largest" (module
+    docstring): its own difference bounds its error only if it converges at first order or
+    faster, which no order checks (two levels, or three without one). The largest is unchanged,
+    so is a test of every estimate against EPS."""
+    err, how = np.array(err, float), list(how)
+    top = float(np.max(err))
+    for k, kind in enumerate(how):
+        if kind == "difference" and err[k] < top:
+            err[k], how[k] = top, "difference, the largest"
     return err, how
 
 
@@ -426,7 +434,7 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
                 values = [r["result"] for r, _ in rows]
                 err, how = estimate(hs, values, _scale(values[-1], what),
                                     SOLID_MODES_ORDER if method in SOLIDS and what == "modes"
-                                    else None, shared=what == "steady")
+                                    else None)
                 if np.all(err + mode_err < eps):
                     stopped = True
                     break
@@ -463,9 +471,11 @@ def _refine(refiner: Refiner, scene: Scene, eps: float, what: str, max_levels: i
         if lv["discretisation"] not in [x["discretisation"] for x in listed]:
             listed.append(lv)
     levels = listed
+    total = err + mode_err
+    if what == "steady":                      # the ladder's tests above saw the own estimates
+        total, how = share_largest(total, how)
     if key:
         how = [f"{k} + mode-count difference" for k in how]
-    total = err + mode_err
     out = {"best": best, "scene": best_scene, "estimate": [float(x) for x in total],
            "how": how, "levels": levels,
            "discretisation": {**best["discretisation"], "levels": levels}}

@@ -144,10 +144,6 @@ H_FLOOR = 1e-9
 H_MAX_SHARE = 1.0 / 50.0
 
 
-#: the scheme's counts a checkpoint carries over (:class:`Clock`)
-CARRIED = ("iterations", "factorizations")
-
-
 @dataclass
 class Clock:
     """The controller's state after an accepted step (all a resume needs besides q, v and the
@@ -167,8 +163,9 @@ class Clock:
     used: float | None = 0.0  # sum over the accepted steps of |e_tip| / s (the error budget spent)
     r_smooth: float = 0.0     # the smoothed r (0: none yet) ...
     h_smooth: float = 1.0     # ... at this step size (s)
-    iterations: int = 0       # Newton iterations and factorisations up to this step (a resumed
-    factorizations: int = 0   # run's counts include the runs before it, as its steps do)
+    #: the scheme's counters (Newton iterations, factorisations, ...) up to this step: a
+    #: resumed run's include the runs before it, as its steps do
+    counts: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -299,11 +296,10 @@ def simulate_adaptive(form, eps: float, t_end: float, *, h0: float, scale: float
     # checkpoints by time: at the first step past each multiple of checkpoint_dt after t0
     next_ckpt = [t0 + (math.floor((clock.t - t0) / checkpoint_dt + 1e-9) + 1) * checkpoint_dt
                  if checkpoint_dt else math.inf]
-    counted = {k: getattr(clock, k) for k in CARRIED}       # by the runs before this one
+    counted = dict(clock.counts)                            # by the runs before this one
 
     def carry() -> None:
-        for k in CARRIED:
-            setattr(clock, k, counted[k] + scheme.stats[k])
+        clock.counts = {k: counted.get(k, 0) + v for k, v in scheme.stats.items()}
 
     wall0 = time.perf_counter()
     h_prev = None
@@ -426,9 +422,8 @@ def simulate_adaptive(form, eps: float, t_end: float, *, h0: float, scale: float
     info["error_estimate"] = [x / peak for x in clock.error_m]
     info["eps"] = eps
     info["scale_m"] = scale
-    stats = dict(scheme.stats)
+    stats = dict(clock.counts)
     stats["rejected"] = clock.rejected
-    stats.update({k: getattr(clock, k) for k in CARRIED})
     return RunResult(t=clock.t, steps=clock.accepted, tip=np.array(last_tip, dtype=float),
                      diverged=diverged, wall_s=wall, samples=clock.samples, history=history,
                      growth=ring[order].copy(), stats=stats, interrupted=interrupted,

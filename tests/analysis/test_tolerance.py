@@ -8,7 +8,7 @@ import pytest
 from mpi4py import MPI
 from scipy.integrate import quad
 
-from fxflex.analysis.tolerance import COMPONENTS, estimate, ladder
+from fxflex.analysis.tolerance import COMPONENTS, estimate, ladder, share_largest
 from fxflex.cli import main
 from fxflex.formulation import build
 from fxflex.scene import Scene, scene_from_dict
@@ -193,10 +193,11 @@ def test_ffrf_tol_pairs_each_mesh_with_the_first_half_of_its_modes():
     truncated = np.array(levels[-2]["tip_m"])
     assert np.max(np.abs(truncated - fresh)) < 1e-7 * np.linalg.norm(fresh)
     more = [np.array(lv["tip_m"]) for lv in levels[1::2]]
-    mesh_est, _ = estimate([1.0 / lv["discretisation"]["mesh"][0] for lv in levels[1::2]], more,
-                           _scale(more[-1], "steady"), shared=True)
+    mesh_est, how = estimate([1.0 / lv["discretisation"]["mesh"][0] for lv in levels[1::2]],
+                             more, _scale(more[-1], "steady"))
     difference, _ = estimate([2.0, 1.0], [truncated, more[-1]], _scale(more[-1], "steady"))
-    assert np.allclose(out["estimate"], mesh_est + difference, rtol=1e-12, atol=0)
+    expected, _ = share_largest(mesh_est + difference, how)
+    assert np.allclose(out["estimate"], expected, rtol=1e-12, atol=0)
     ref = refmod.stored_reference(Scene())["theories"]["linear"]["1000"]["reference_m"]
     assert np.max(true_errors(out["best"]["result"], ref, "steady")) < eps
 
@@ -308,19 +309,23 @@ def test_a_tlf_guess_that_fails_falls_back_to_the_cold_equilibrium():
 
 def test_only_the_solids_frequencies_cap_the_order(monkeypatch):
     """_refine passes SOLID_MODES_ORDER to the estimate for the solids' frequencies only: not for
-    their steady tips, not for the beams; and shares a small component's difference for the
-    steady tips only (seen by wrapping ``estimate``)."""
+    their steady tips, not for the beams (seen by wrapping ``estimate``); it shares a small
+    component's difference (share_largest) in what it reports for steady tips only."""
     from fxflex.analysis import tolerance
 
     seen, shares = [], []
-    real = tolerance.estimate
+    real, real_share = tolerance.estimate, tolerance.share_largest
 
     def spy(h, values, scale, order_cap=None, shared=False):
         seen.append(order_cap)
-        shares.append(shared)
         return real(h, values, scale, order_cap, shared)
 
+    def share_spy(err, how):
+        shares.append(True)
+        return real_share(err, how)
+
     monkeypatch.setattr(tolerance, "estimate", spy)
+    monkeypatch.setattr(tolerance, "share_largest", share_spy)
     comm = MPI.COMM_WORLD
     cases = [("modes", "tlf", tolerance.SOLID_MODES_ORDER), ("steady", "tlf", None),
              ("modes", "lebb", None), ("steady", "lebb", None)]
@@ -335,7 +340,7 @@ def test_only_the_solids_frequencies_cap_the_order(monkeypatch):
         except tolerance.ToleranceNotMet:
             pass
         assert seen and set(seen) == {cap}, (what, method, seen)
-        assert set(shares) == {what == "steady"}
+        assert bool(shares) == (what == "steady")
 
 
 def test_next_beam_level_is_the_count_the_convergence_asks_for():
