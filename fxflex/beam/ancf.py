@@ -232,27 +232,21 @@ class ANCF(FormulationBase):
             v3[s, 0], v3[s, 1], v3[s, 2] = -rate * y, rate * x, 0.0
 
     # ------------------------------------------------------------------ forces
-    def add_elastic_force(self, u: np.ndarray, out: np.ndarray) -> None:
-        """out += Q_k = (K_L + K_N) (e - e0) (Eq. 55/57)."""
+    def add_elastic_force(self, u: np.ndarray, out: np.ndarray, route: str | None = None
+                          ) -> None:
+        """out += Q_k = (K_L + K_N) (e - e0) (Eq. 55/57) by ``route`` (default ``force_eval``)."""
         self.KL_add.add(u, out)
-        if self.force_eval == "invariant":
+        if (route or self.force_eval) == "invariant":
             self.engine.add_force_system(u, out)
         else:
             self.engine.add_force_element(u, out)
 
-    def elastic_force(self, e: np.ndarray) -> np.ndarray:
-        """Q_k at coordinates e by the ``force_eval`` route (allocating; checks)."""
+    def elastic_force(self, e: np.ndarray, route: str | None = None) -> np.ndarray:
+        """Q_k at coordinates e (allocating) by ``route`` (default ``force_eval``). The steady
+        Newton's residual and the root stress take "element": the same force to round-off,
+        without the system matrices that only the time loop needs."""
         out = np.zeros(self.n_full)
-        self.add_elastic_force(np.ascontiguousarray(e - self.e0), out)
-        return out
-
-    def static_force(self, e: np.ndarray) -> np.ndarray:
-        """Q_k at coordinates e by the element invariant route (the same force to round-off,
-        no system matrices): the steady Newton's residual and the root stress."""
-        out = np.zeros(self.n_full)
-        u = np.ascontiguousarray(e - self.e0)
-        self.KL_add.add(u, out)
-        self.engine.add_force_element(u, out)
+        self.add_elastic_force(np.ascontiguousarray(e - self.e0), out, route)
         return out
 
     def acceleration(self, t: float, q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
@@ -401,7 +395,7 @@ class ANCF(FormulationBase):
         M = sum_s r_s x Q_s over the gradient slots (a rigid rotation d theta moves each gradient
         by d theta x r_s); then N = -F_X, int Y sigma dA = M_Z, int Z sigma dA = -M_Y, spread
         linearly over the section as in beam theory."""
-        Q = self.static_force(q)
+        Q = self.elastic_force(q, "element")
         Q -= self.scene.load.factor(t) * self.fq
         A = self.drive.A(t)
         Qr = Q[:DPN].reshape(SLOTS, 3) @ A               # rows (A^T Q_s)^T
@@ -422,7 +416,7 @@ class ANCF(FormulationBase):
         e = self._full(x)
         rate = math.sqrt(s) * self.scene.rotation.omega
         e3 = e.reshape(-1, 3)
-        r = self.static_force(e)
+        r = self.elastic_force(e, "element")
         r -= rate**2 * (self.Ms @ (e3 @ P3.T)).reshape(-1)
         if self.absolute:
             r += self.c_rho * rate * (self.Ms @ ((e3 - self.e0n.reshape(-1, 3)) @ S3.T)).reshape(-1)

@@ -50,9 +50,9 @@ from fxflex.numerics.qep import DenseLinearisation
 from fxflex.scene import Drive, Scene
 from fxflex.scene.kinematics import P3, S3
 
-__all__ = ["FloatingFrameBeam", "prolongation", "section_quadratic", "section_linear", "point_quadratic",
-           "point_linear", "section_rotation_second_order", "point_rotation_second_order", "N0",
-           "NY", "NZ", "QUADRATURE_POINTS"]
+__all__ = ["FloatingFrameBeam", "prolongation", "section_quadratic", "section_linear",
+           "point_quadratic", "point_linear", "section_rotation_second_order",
+           "point_rotation_second_order", "N0", "NY", "NZ", "QUADRATURE_POINTS"]
 
 #: Gauss points per element along X (exact to degree 11: the taper makes the integrands
 #: polynomials of degree <= 10 for an untwisted beam; the twist adds smooth trigonometric terms)

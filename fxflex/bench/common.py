@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import statistics
 import subprocess
 import sys
 import time
@@ -91,20 +92,17 @@ def median_time(fn, comm=None, budget: float = REPEAT_BUDGET_S, most: int = MAX_
     ``--tol`` ladder: 3.1x one time, 2.7x the next against the same table route); a route of
     seconds runs once. ``comm``: the ranks agree on the count (each stops when the slowest
     rank's total reaches the budget), for a collective ``fn``; the median is this rank's."""
-    times, out = [], None
+    times: list[float] = []
     while True:
         t0 = time.perf_counter()
         result = fn()
         times.append(time.perf_counter() - t0)
-        if out is None:
-            out = (result,)
+        if len(times) == 1:
+            first = result
         spent = sum(times)
         if comm is not None and comm.size > 1:
             from mpi4py import MPI
             spent = comm.allreduce(spent, op=MPI.MAX)
         if spent >= budget or len(times) >= most:
             break
-    times.sort()
-    mid = len(times) // 2
-    median = times[mid] if len(times) % 2 else 0.5 * (times[mid - 1] + times[mid])
-    return out[0], median, len(times)
+    return first, statistics.median(times), len(times)

@@ -41,11 +41,11 @@ def test_a_small_components_difference_takes_the_largest_estimate():
     frequencies (each relative to itself) are not shared."""
     f = np.array([[1.0, 1e-3, 0.1], [0.9, 0.98e-3, 0.11], [0.88, 0.975e-3, 0.108]])
     own, how = estimate([1.0, 0.5], f[:2], 1.0)
-    err, shared_how = estimate([1.0, 0.5], f[:2], 1.0, shared=True)
+    err, shared_how = share_largest(*estimate([1.0, 0.5], f[:2], 1.0))
     assert own[1] == pytest.approx(2e-5) and err[1] == pytest.approx(0.1)
     assert shared_how == ["difference", "difference, the largest", "difference, the largest"]
     assert max(err) == max(own)
-    err3, how3 = estimate([1.0, 0.5, 0.25], f, 1.0, shared=True)
+    err3, how3 = share_largest(*estimate([1.0, 0.5, 0.25], f, 1.0))
     assert how3[0] == "richardson" and how3[1] == "richardson"
     assert err3[2] == pytest.approx(max(err3[0], err3[1])) and how3[2] == "difference, the largest"
     assert estimate([1.0, 0.5, 0.25], f, 1.0)[0][1] == pytest.approx(err3[1])
@@ -316,9 +316,9 @@ def test_only_the_solids_frequencies_cap_the_order(monkeypatch):
     seen, shares = [], []
     real, real_share = tolerance.estimate, tolerance.share_largest
 
-    def spy(h, values, scale, order_cap=None, shared=False):
+    def spy(h, values, scale, order_cap=None):
         seen.append(order_cap)
-        return real(h, values, scale, order_cap, shared)
+        return real(h, values, scale, order_cap)
 
     def share_spy(err, how):
         shares.append(True)

@@ -312,7 +312,8 @@ def test_run_tol_json_and_resume(capsys, tmp_path):
     assert resumed["steps"] == d["steps"]
     # the counts include the run before the checkpoint, as the steps do: the resumed part (5 %
     # of the run, a fresh factor) adds at least one factorisation and cannot hold all of them
-    before, after = time_info["factorizations"], resumed["discretisation"]["time"]["factorizations"]
+    before = time_info["factorizations"]
+    after = resumed["discretisation"]["time"]["factorizations"]
     assert after > before // 2 and after >= 1
     # a fixed mesh key keeps the scene's discretisation; without --tol both fields are null
     status, out, _ = _cli(capsys, "run", "--method", "lebb", "--tol", "1e-2", "--json",
